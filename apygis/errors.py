@@ -1,0 +1,81 @@
+"""The exceptions apygis raises.
+
+Every failure a user can cause raises a subclass of :class:`ApygisError`. Each
+subclass also derives from the built-in exception that fits it, so that code
+which already catches ``ValueError`` or ``OSError`` keeps working
+(``FormatError`` is a ``ValueError``, ``FileOverwriteError`` a
+``FileExistsError``).
+
+Messages name the file, the record (or line) and what was expected, so that a
+user can find and fix the problem without a traceback.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "ApygisError",
+    "CapacityError",
+    "DriverError",
+    "FileOverwriteError",
+    "FormatError",
+    "RecordNotFoundError",
+    "SymbolLibraryError",
+    "TopologyError",
+    "ValueRangeError",
+]
+
+
+class ApygisError(Exception):
+    """Root of every error apygis raises on purpose."""
+
+
+class FormatError(ApygisError, ValueError):
+    """A file's content is not what its format requires.
+
+    Parameters
+    ----------
+    message : str
+        What was wrong and what was expected.
+    path : str or os.PathLike, optional
+        The file, prefixed to the message.
+    record : str, optional
+        Where in the file (``"line 12"``, ``"line point record 7"``, ...).
+    """
+
+    def __init__(self, message: str, path=None, record: str | None = None):
+        self.path = None if path is None else str(path)
+        self.record = record
+        self.reason = message
+        where = ": ".join(p for p in (self.path, record) if p)
+        super().__init__(f"{where}: {message}" if where else message)
+
+
+class ValueRangeError(FormatError):
+    """A value does not fit the field a format gives it (too many digits, too long a text)."""
+
+
+class CapacityError(ApygisError, OverflowError):
+    """A table holds more records than a format (or an instrument) can take."""
+
+
+class DriverError(ApygisError, ValueError):
+    """No driver fits a path or a name, or the driver cannot do what was asked."""
+
+
+class FileOverwriteError(ApygisError, FileExistsError):
+    """The target exists and overwriting was not asked for."""
+
+
+class TopologyError(ApygisError, ValueError):
+    """Line references do not allow the operation (an open ring, a full junction, ...)."""
+
+
+class RecordNotFoundError(ApygisError, LookupError):
+    """No record with the given point number."""
+
+    def __str__(self) -> str:  # LookupError would quote the message like a KeyError
+        return str(self.args[0]) if self.args else ""
+
+
+class SymbolLibraryError(ApygisError, ValueError):
+    """A symbol library cannot do what was asked (symbol 00 is reserved, a cell is off the grid)."""
