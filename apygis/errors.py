@@ -15,9 +15,14 @@ from __future__ import annotations
 __all__ = [
     "ApygisError",
     "CapacityError",
+    "ConvergenceError",
+    "DegenerateGeometryError",
     "DriverError",
     "FileOverwriteError",
     "FormatError",
+    "MeasurementError",
+    "OrientationError",
+    "RecordError",
     "RecordNotFoundError",
     "SymbolLibraryError",
     "TopologyError",
@@ -66,6 +71,10 @@ class FileOverwriteError(ApygisError, FileExistsError):
     """The target exists and overwriting was not asked for."""
 
 
+class RecordError(ApygisError, ValueError):
+    """A record or its arguments are not valid (code outside 0-99, text too long, NaN, ...)."""
+
+
 class TopologyError(ApygisError, ValueError):
     """Line references do not allow the operation (an open ring, a full junction, ...)."""
 
@@ -79,3 +88,28 @@ class RecordNotFoundError(ApygisError, LookupError):
 
 class SymbolLibraryError(ApygisError, ValueError):
     """A symbol library cannot do what was asked (symbol 00 is reserved, a cell is off the grid)."""
+
+
+class OrientationError(ApygisError, ValueError):
+    """An orientation (map, photo, model) cannot be computed from the data given."""
+
+
+class DegenerateGeometryError(OrientationError):
+    """Too few points, or points whose geometry does not determine the parameters.
+
+    Collinear control for an affine transform, coplanar points for a DLT, four
+    collinear points for a height correction, a parameter that the control
+    does not determine: the message names what is missing.
+    """
+
+
+class MeasurementError(OrientationError):
+    """A measurement set is incomplete or inconsistent.
+
+    A point measured once where the method needs it measured twice, a
+    measured point missing from the control, a photo without measurements.
+    """
+
+
+class ConvergenceError(OrientationError):
+    """An iterative solution (Gauss-Newton, Newton inverse) did not converge."""

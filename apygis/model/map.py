@@ -1,0 +1,605 @@
+"""The compiled map: a :class:`MapFile` of :class:`Layer` s of symbols, line points and texts.
+
+>>> m = MapFile("ZH1091", scale=5000)
+>>> roads = m.layer("r")
+>>> roads.add_line([(0, 0, 400), (50, 0, 401), (50, 30, 402)], code=12)
+[1, 2, 3]
+>>> roads.add_symbol(10.0, 5.0, 400.5, code=7)
+1
+>>> roads.add_text(12.0, 5.0, 400.5, "Kirchweg")
+1
+>>> roads.counts()
+{'symbols': 1, 'line_points': 3, 'lines': 1, 'closed_lines': 0, 'texts': 1}
+
+Point numbers
+-------------
+The symbols, line points and texts of a layer are numbered independently. A
+new record gets one more than the highest number in use (1 for the first).
+Once 9999 (the largest number the APY native format stores) is in use, the
+lowest free number from 0 to 9999 is taken instead, so that a layer can be
+filled to APY's capacity of 10000 line points; past that, numbers go on
+above 9999 (the model has no limit; only the native format refuses them).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+from apygis.errors import RecordError, RecordNotFoundError, TopologyError
+from apygis.model import topology
+from apygis.model.records import (
+    APY_CAPACITY,
+    APY_MAX_NUM,
+    LINE_DTYPE,
+    MAX_CODE,
+    NO_REF,
+    REF_FIELDS,
+    SYMBOL_DTYPE,
+    TABLES,
+    TEXT_DTYPE,
+    TEXT_LEN,
+    Table,
+)
+
+__all__ = ["Layer", "MapFile", "check_ext", "check_map_id", "check_text", "crs_string"]
+
+_EXT_RE = re.compile(r"^[a-z]{1,3}$")
+_ID_RE = re.compile(r"^[A-Za-z0-9_-]{1,32}$")
+
+
+def check_ext(ext: str) -> str:
+    """A layer extension: 1-3 letters, returned in lower case.
+
+    >>> check_ext("R")
+    'r'
+    """
+    if not isinstance(ext, str) or not _EXT_RE.match(ext.lower()):
+        raise RecordError(f"a layer extension is 1 to 3 letters (a-z), not {ext!r}")
+    return ext.lower()
+
+
+def check_map_id(map_id: str) -> str:
+    """A map identification: 1-32 characters of A-Z, a-z, 0-9, '_' and '-'."""
+    if not isinstance(map_id, str) or not _ID_RE.match(map_id):
+        raise RecordError(
+            f"a map ID is 1 to 32 characters of letters, digits, '_' and '-', not {map_id!r}"
+        )
+    return map_id
+
+
+def _check_code(code) -> int:
+    if isinstance(code, bool) or not isinstance(code, (int, np.integer)):
+        raise RecordError(f"a code is an integer from 0 to {MAX_CODE}, not {code!r}")
+    if not 0 <= int(code) <= MAX_CODE:
+        raise RecordError(f"a code is from 0 to {MAX_CODE}, not {code}")
+    return int(code)
+
+
+def _check_xyz(x, y, z) -> tuple[float, float, float]:
+    try:
+        v = (float(x), float(y), float(z))
+    except (TypeError, ValueError):
+        raise RecordError(f"coordinates must be numbers, not {(x, y, z)!r}") from None
+    if not all(math.isfinite(c) for c in v):
+        raise RecordError(f"coordinates must be finite, not {v!r}")
+    return v
+
+
+def check_text(text) -> str:
+    """A text: a string of at most 24 characters, no control characters."""
+    if not isinstance(text, str):
+        raise RecordError(f"a text is a string, not {text!r}")
+    if len(text) > TEXT_LEN:
+        raise RecordError(f"a text has at most {TEXT_LEN} characters, {text!r} has {len(text)}")
+    if any(ord(c) < 32 or 127 <= ord(c) < 160 for c in text):
+        raise RecordError(f"a text may not contain control characters: {text!r}")
+    return text
+
+
+def _allocate(used: np.ndarray, count: int) -> np.ndarray:
+    """``count`` new point numbers by the rule in this module's docstring."""
+    start = int(used.max()) + 1 if len(used) else 1
+    if start + count - 1 <= APY_MAX_NUM:
+        return np.arange(start, start + count, dtype=np.int64)
+    free = np.setdiff1d(np.r_[np.arange(1, APY_MAX_NUM + 1), 0], used, assume_unique=False)
+    free = np.r_[free[free != 0], free[free == 0]]
+    # numbers above the APY range, continuing after the highest one in use
+    beyond_start = max(start, APY_MAX_NUM + 1)
+    need = max(0, count - len(free))
+    return np.r_[free[:count], np.arange(beyond_start, beyond_start + need)].astype(np.int64)
+
+
+class Layer:
+    """One map layer: its symbols, line points and texts.
+
+    The tables are read-only numpy structured arrays (:attr:`symbols`,
+    :attr:`line_points`, :attr:`texts`; fields in
+    :mod:`apygis.model.records`). Change them with the methods below, which
+    keep point numbers unique and line references consistent, or replace them
+    wholesale with :meth:`from_arrays` (drivers do that).
+    """
+
+    def __init__(self, ext: str):
+        self.ext = check_ext(ext)
+        self._tables = {name: Table(dtype) for name, dtype in TABLES.items()}
+
+    # ------------------------------------------------------------------ tables
+
+    @classmethod
+    def from_arrays(cls, ext: str, symbols=None, line_points=None, texts=None) -> Layer:
+        """A layer from whole tables (copied; missing fields of other dtypes converted)."""
+        lay = cls(ext)
+        for name, arr in (("symbols", symbols), ("line_points", line_points), ("texts", texts)):
+            if arr is not None:
+                lay._tables[name].replace(arr)
+        return lay
+
+    @property
+    def symbols(self) -> np.ndarray:
+        return self._tables["symbols"].data
+
+    @property
+    def line_points(self) -> np.ndarray:
+        return self._tables["line_points"].data
+
+    @property
+    def texts(self) -> np.ndarray:
+        return self._tables["texts"].data
+
+    def table(self, name: str) -> np.ndarray:
+        """A table by name: ``"symbols"``, ``"line_points"`` or ``"texts"``."""
+        return self._tables[name].data
+
+    def __len__(self) -> int:
+        return sum(len(t) for t in self._tables.values())
+
+    def __repr__(self) -> str:
+        return (
+            f"<Layer {self.ext!r}: {len(self.symbols)} symbols, "
+            f"{len(self.line_points)} line points, {len(self.texts)} texts>"
+        )
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, Layer):
+            return NotImplemented
+        return self.ext == other.ext and all(
+            np.array_equal(self.table(n), other.table(n)) for n in TABLES
+        )
+
+    __hash__ = None
+
+    def copy(self) -> Layer:
+        return Layer.from_arrays(self.ext, self.symbols, self.line_points, self.texts)
+
+    # ------------------------------------------------------------------ add
+
+    def add_symbol(self, x: float, y: float, z: float, code: int) -> int:
+        """Add a symbol (code 0-99; 0 is the spot height) and return its point number."""
+        x, y, z = _check_xyz(x, y, z)
+        code = _check_code(code)
+        t = self._tables["symbols"]
+        num = int(_allocate(t.data["num"], 1)[0])
+        t.append(np.array([(num, x, y, z, code)], dtype=SYMBOL_DTYPE))
+        return num
+
+    def add_text(self, x: float, y: float, z: float, text: str) -> int:
+        """Add a text (at most 24 characters) at a position and return its point number."""
+        x, y, z = _check_xyz(x, y, z)
+        text = check_text(text)
+        t = self._tables["texts"]
+        num = int(_allocate(t.data["num"], 1)[0])
+        t.append(np.array([(num, x, y, z, text)], dtype=TEXT_DTYPE))
+        return num
+
+    def add_line(
+        self, points: Iterable[Sequence[float]], code: int, closed: bool = False
+    ) -> list[int]:
+        """Add a line through ``points`` ((x, y, z) each) and return its point numbers.
+
+        Consecutive points reference each other forward and backward; a closed
+        line (3 points at least) also links its last point to its first. A
+        single point starts a line that :meth:`extend_line` continues.
+        """
+        code = _check_code(code)
+        pts = np.asarray(list(points), dtype=float)
+        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
+            raise RecordError("a line needs one or more points of (x, y, z)")
+        if not np.isfinite(pts).all():
+            raise RecordError("line coordinates must be finite")
+        if closed and len(pts) < 3:
+            raise TopologyError(f"a closed line needs at least three points, not {len(pts)}")
+        t = self._tables["line_points"]
+        nums = _allocate(t.data["num"], len(pts))
+        rows = np.zeros(len(pts), dtype=LINE_DTYPE)
+        rows["num"] = nums
+        rows["x"], rows["y"], rows["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
+        rows["code"] = code
+        rows["fwd"] = np.r_[nums[1:], nums[0] if closed else NO_REF]
+        rows["back"] = np.r_[nums[-1] if closed else NO_REF, nums[:-1]]
+        rows["side1"] = rows["side2"] = NO_REF
+        t.append(rows)
+        return [int(n) for n in nums]
+
+    def extend_line(self, end: int, points: Iterable[Sequence[float]]) -> list[int]:
+        """Continue a line from its end point ``end`` and return the new point numbers.
+
+        ``end`` must lack a forward reference (the new points follow it) or,
+        failing that, a backward reference (the line grows at its start).
+        """
+        lp = self._tables["line_points"].rows()
+        i = self._line_row(end)
+        pts = np.asarray(list(points), dtype=float).reshape(-1, 3)
+        if not np.isfinite(pts).all():
+            raise RecordError("line coordinates must be finite")
+        if len(pts) == 0:
+            return []
+        if lp["fwd"][i] == NO_REF:
+            ahead, behind = "fwd", "back"
+        elif lp["back"][i] == NO_REF:
+            ahead, behind = "back", "fwd"
+        else:
+            raise TopologyError(f"line point {end} is not the end of a line")
+        code = int(lp["code"][i])
+        nums = _allocate(lp["num"], len(pts))
+        rows = np.zeros(len(pts), dtype=LINE_DTYPE)
+        rows["num"] = nums
+        rows["x"], rows["y"], rows["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
+        rows["code"] = code
+        rows[ahead] = np.r_[nums[1:], NO_REF]
+        rows[behind] = np.r_[end, nums[:-1]]
+        rows["side1"] = rows["side2"] = NO_REF
+        lp[ahead][i] = nums[0]
+        self._tables["line_points"].append(rows)
+        return [int(n) for n in nums]
+
+    # ------------------------------------------------------------------ edit lines
+
+    def _line_row(self, num: int) -> int:
+        rows = np.flatnonzero(self._tables["line_points"].data["num"] == num)
+        if len(rows) == 0:
+            raise RecordNotFoundError(f"layer {self.ext}: no line point number {num}")
+        return int(rows[0])
+
+    def split(self, a: int, b: int, xyz: Sequence[float]) -> int:
+        """LS (line split): insert a new point between neighbours ``a`` and ``b``.
+
+        The new point takes the line code of ``a``; returns its number.
+        """
+        x, y, z = _check_xyz(*xyz)
+        t = self._tables["line_points"]
+        lp = t.rows()
+        i, j = self._line_row(a), self._line_row(b)
+        if lp["fwd"][i] == b and lp["back"][j] == a:
+            pass
+        elif lp["fwd"][j] == a and lp["back"][i] == b:
+            i, j, a, b = j, i, b, a
+        else:
+            raise TopologyError(f"layer {self.ext}: line points {a} and {b} are not neighbours")
+        num = int(_allocate(lp["num"], 1)[0])
+        lp["fwd"][i] = num
+        lp["back"][j] = num
+        t.append(np.array([(num, x, y, z, lp["code"][i], b, a, NO_REF, NO_REF)], dtype=LINE_DTYPE))
+        return num
+
+    def join(self, num: int, target: int) -> str:
+        """Join the line end ``num`` to the existing line point ``target``.
+
+        * If ``target`` is the other end of the same open line, the line is
+          closed (forward/backward references): returns ``"closed"``.
+        * Otherwise ``num`` becomes a branch of ``target``: its free forward
+          or backward reference points to ``target``, and ``target`` takes
+          ``num`` on a free side reference: returns ``"branch"``.
+        """
+        lp = self._tables["line_points"].rows()
+        i, j = self._line_row(num), self._line_row(target)
+        if i == j:
+            raise TopologyError(f"layer {self.ext}: cannot join line point {num} to itself")
+        if num in (lp["side1"][j], lp["side2"][j]) or target in (lp["fwd"][i], lp["back"][i]):
+            raise TopologyError(
+                f"layer {self.ext}: line points {num} and {target} are already joined"
+            )
+        free = [f for f in ("fwd", "back") if lp[f][i] == NO_REF]
+        if not free:
+            raise TopologyError(
+                f"layer {self.ext}: line point {num} is not the end of a line (it has both a "
+                "forward and a backward reference)"
+            )
+        clo = topology.closure(lp, num)
+        if not clo.closed and len(clo.points) >= 3 and target in (clo.start, clo.end):
+            if num == clo.end and target == clo.start:
+                lp["fwd"][i], lp["back"][j] = target, num
+                return "closed"
+            if num == clo.start and target == clo.end:
+                lp["back"][i], lp["fwd"][j] = target, num
+                return "closed"
+        side = next((s for s in ("side1", "side2") if lp[s][j] == NO_REF), None)
+        if side is None:
+            raise TopologyError(
+                f"layer {self.ext}: line point {target} already has two branches "
+                "(both side references are used)"
+            )
+        ref = "back" if "back" in free else "fwd"
+        lp[ref][i] = target
+        lp[side][j] = num
+        return "branch"
+
+    # ------------------------------------------------------------------ delete
+
+    def delete_symbol(self, num: int) -> None:
+        """Delete the symbol with point number ``num``."""
+        self._delete_plain("symbols", num)
+
+    def delete_text(self, num: int) -> None:
+        """Delete the text with point number ``num``."""
+        self._delete_plain("texts", num)
+
+    def _delete_plain(self, table: str, num: int) -> None:
+        t = self._tables[table]
+        mask = t.data["num"] != num
+        if mask.all():
+            word = "symbol" if table == "symbols" else "text"
+            raise RecordNotFoundError(f"layer {self.ext}: no {word} number {num}")
+        t.keep(mask)
+
+    def delete_line_point(self, num: int) -> None:
+        """Delete a line point and repair the references to it.
+
+        Its backward and forward neighbours are linked to each other (a line
+        loses the point, not its continuity; a ring of three becomes an open
+        line of two). Branches hanging on the point move to the neighbour that
+        took its place (backward first) if that has a free side reference;
+        otherwise their end becomes a free line end.
+        """
+        t = self._tables["line_points"]
+        lp = t.rows()
+        i = self._line_row(num)
+        nums = lp["num"]
+        b, f = int(lp["back"][i]), int(lp["fwd"][i])
+        bi = topology._row_or_none(nums, b)
+        fi = topology._row_or_none(nums, f)
+        mutual_b = bi is not None and lp["fwd"][bi] == num
+        mutual_f = fi is not None and lp["back"][fi] == num
+        if mutual_b and mutual_f and bi != fi:
+            ring_of_three = lp["fwd"][fi] == b and lp["back"][bi] == f
+            if ring_of_three:  # what is left are two points: an open line
+                lp["fwd"][bi] = f
+                lp["back"][fi] = b
+                lp["back"][bi] = NO_REF
+                lp["fwd"][fi] = NO_REF
+            else:
+                lp["fwd"][bi] = f
+                lp["back"][fi] = b
+        else:
+            if mutual_b:
+                lp["fwd"][bi] = NO_REF
+            if mutual_f:
+                lp["back"][fi] = NO_REF
+            if bi is not None and bi == fi:  # two-point ring
+                lp["fwd"][bi] = lp["back"][bi] = NO_REF
+        heir = bi if mutual_b else (fi if mutual_f else None)
+        # Every other reference to the deleted point: branches and side links.
+        for ref in REF_FIELDS:
+            hit = np.flatnonzero((lp[ref] == num) & (np.arange(len(lp)) != i))
+            for k in hit:
+                lp[ref][k] = NO_REF
+                if ref in ("fwd", "back") and heir is not None and heir != k:
+                    side = next((s for s in ("side1", "side2") if lp[s][heir] == NO_REF), None)
+                    if side is not None:
+                        lp[ref][k] = nums[heir]
+                        lp[side][heir] = nums[k]
+        mask = np.ones(len(lp), dtype=bool)
+        mask[i] = False
+        t.keep(mask)
+
+    def delete_line(self, num: int) -> list[int]:
+        """Delete the whole line (chain) through line point ``num``; returns the numbers deleted."""
+        clo = topology.closure(self.line_points, num)
+        for n in clo.points:
+            self.delete_line_point(n)
+        return list(clo.points)
+
+    # ------------------------------------------------------------------ topology
+
+    def chains(self) -> topology.ChainSet:
+        """The lines of this layer as chains of line-point rows (see ``topology``)."""
+        return topology.chains(self.line_points)
+
+    def branches(self) -> list[dict]:
+        return topology.branches(self.line_points)
+
+    def margin_points(self) -> np.ndarray:
+        """Line points lacking a forward or backward reference (APY's margin file)."""
+        lp = self.line_points
+        return lp[topology.margin_mask(lp)]
+
+    def closure(self, num: int) -> topology.Closure:
+        return topology.closure(self.line_points, num)
+
+    def area(self, first: int, second: int) -> topology.AreaResult:
+        return topology.area(self.line_points, first, second)
+
+    def dhi(self, a: Sequence[float], b: Sequence[float]) -> topology.DHI:
+        return topology.dhi(a, b)
+
+    def geometries(self) -> np.ndarray:
+        """Shapely LineString Z / Polygon Z of every line, in :meth:`chains` order."""
+        return topology.line_geometries(self.line_points)
+
+    def validate(self) -> list[topology.Issue]:
+        """Errors and warnings about this layer's records (see :mod:`~apygis.model.topology`)."""
+        issues = topology.validate_numbers("symbols", self.symbols["num"])
+        issues += topology.validate_numbers("texts", self.texts["num"])
+        issues += topology.validate_line_points(self.line_points)
+        bad = (self.symbols["code"] < 0) | (self.symbols["code"] > MAX_CODE)
+        issues += [
+            topology.Issue("error", "symbols", int(n), "bad-code", f"symbol {n}: code outside 0-99")
+            for n in self.symbols["num"][bad]
+        ]
+        bad = (self.line_points["code"] < 0) | (self.line_points["code"] > MAX_CODE)
+        issues += [
+            topology.Issue(
+                "error", "line_points", int(n), "bad-code", f"line point {n}: code outside 0-99"
+            )
+            for n in self.line_points["num"][bad]
+        ]
+        for name, cap in APY_CAPACITY.items():
+            n = len(self.table(name))
+            if n > cap:
+                issues.append(
+                    topology.Issue(
+                        "warning",
+                        name,
+                        -1,
+                        "over-capacity",
+                        f"{n} {name.replace('_', ' ')} exceed APY's capacity of {cap}: "
+                        "the APY native format cannot hold this layer",
+                    )
+                )
+        return issues
+
+    def counts(self) -> dict[str, int]:
+        cs = self.chains()
+        return {
+            "symbols": len(self.symbols),
+            "line_points": len(self.line_points),
+            "lines": len(cs),
+            "closed_lines": int(cs.closed.sum()),
+            "texts": len(self.texts),
+        }
+
+    def extent(self) -> tuple[float, float, float, float, float, float] | None:
+        """``(xmin, ymin, zmin, xmax, ymax, zmax)`` over all records, or None if empty."""
+        parts = [t for t in (self.symbols, self.line_points, self.texts) if len(t)]
+        if not parts:
+            return None
+        x = np.concatenate([p["x"] for p in parts])
+        y = np.concatenate([p["y"] for p in parts])
+        z = np.concatenate([p["z"] for p in parts])
+        return (
+            float(x.min()),
+            float(y.min()),
+            float(z.min()),
+            float(x.max()),
+            float(y.max()),
+            float(z.max()),
+        )
+
+
+class MapFile:
+    """A compiled map: identification, header and layers keyed by extension.
+
+    Parameters
+    ----------
+    id : str
+        Map identification (1-32 characters of letters, digits, '_', '-').
+    scale : int, optional
+        Compilation scale denominator (5000 for 1:5000).
+    crs : pyproj.CRS or anything ``pyproj.CRS.from_user_input`` takes, optional
+        The ground coordinate reference system.
+    notes : str
+        Free notes.
+    """
+
+    def __init__(self, id: str, scale: int | None = None, crs=None, notes: str = ""):
+        self.id = check_map_id(id)
+        self.scale = scale
+        self.crs = crs
+        self.notes = notes
+        self.layers: dict[str, Layer] = {}
+
+    @property
+    def scale(self) -> int | None:
+        return self._scale
+
+    @scale.setter
+    def scale(self, value) -> None:
+        if value is not None:
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise RecordError(f"the scale is a positive integer denominator, not {value!r}")
+            value = int(value)
+        self._scale = value
+
+    @property
+    def crs(self):
+        return self._crs
+
+    @crs.setter
+    def crs(self, value) -> None:
+        if value is not None:
+            from pyproj import CRS
+            from pyproj.exceptions import CRSError
+
+            try:
+                value = CRS.from_user_input(value)
+            except CRSError as exc:
+                raise RecordError(f"not a coordinate reference system: {value!r} ({exc})") from None
+        self._crs = value
+
+    @property
+    def notes(self) -> str:
+        return self._notes
+
+    @notes.setter
+    def notes(self, value: str) -> None:
+        if not isinstance(value, str):
+            raise RecordError(f"notes are a string, not {value!r}")
+        self._notes = value
+
+    def layer(self, ext: str) -> Layer:
+        """The layer with extension ``ext``, created empty if absent."""
+        ext = check_ext(ext)
+        if ext not in self.layers:
+            self.layers[ext] = Layer(ext)
+        return self.layers[ext]
+
+    def add_layer(self, layer: Layer) -> Layer:
+        """Add (or replace) a whole layer."""
+        self.layers[layer.ext] = layer
+        return layer
+
+    def __iter__(self):
+        return iter(self.layers.values())
+
+    def __len__(self) -> int:
+        return len(self.layers)
+
+    def __repr__(self) -> str:
+        scale = f" 1:{self.scale}" if self.scale else ""
+        return f"<MapFile {self.id!r}{scale} layers={sorted(self.layers)}>"
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, MapFile):
+            return NotImplemented
+        return (
+            self.id == other.id
+            and self.scale == other.scale
+            and crs_string(self.crs) == crs_string(other.crs)
+            and self.notes == other.notes
+            and sorted(self.layers) == sorted(other.layers)
+            and all(self.layers[k] == other.layers[k] for k in self.layers)
+        )
+
+    __hash__ = None
+
+    def copy(self) -> MapFile:
+        m = MapFile(self.id, self.scale, self.crs, self.notes)
+        for lay in self:
+            m.add_layer(lay.copy())
+        return m
+
+    def crs_string(self) -> str | None:
+        return crs_string(self.crs)
+
+
+def crs_string(crs) -> str | None:
+    """A CRS as ``"AUTH:CODE"`` when it has an exact one, else as WKT2 on one line."""
+    if crs is None:
+        return None
+    auth = crs.to_authority(min_confidence=100)
+    if auth is not None:
+        return f"{auth[0]}:{auth[1]}"
+    return crs.to_wkt()
