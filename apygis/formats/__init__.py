@@ -142,6 +142,11 @@ def driver_for(path, mode: str) -> Driver:
     """The driver for ``path`` in ``mode`` (``"r"`` or ``"w"``), by the rules above."""
     p = Path(path)
     candidates = [d for d in drivers().values() if mode in d.modes]
+    if mode == "r" and not p.exists():
+        for d in candidates:  # names that stand for several files (dir/ID of APY layers)
+            if d.probe is not None and _safe_probe(d, p):
+                return d
+        raise DriverError(f"{p}: no such file (nor a map of APY layer files {p}.*)")
     if mode == "r" and p.is_file():
         for d in candidates:
             if d.probe is not None and _safe_probe(d, p):
@@ -156,8 +161,6 @@ def driver_for(path, mode: str) -> Driver:
             return d
     if mode == "w" and "apy" in drivers():
         return drivers()["apy"]
-    if mode == "r" and not p.exists():
-        raise DriverError(f"{p}: no such file (nor a map of APY layer files {p}.*)")
     exts = sorted({e for d in candidates for e in d.extensions})
     raise DriverError(
         f"{p}: no driver recognises this file; known extensions: {', '.join(exts)} "

@@ -1,0 +1,35 @@
+"""``apygis printout``: the APY print-out of a map file."""
+
+from __future__ import annotations
+
+import click
+
+from apygis.cli._common import run_guarded
+
+
+@click.command()
+@click.argument("path", type=click.Path())
+@click.option("-o", "--output", type=click.Path(), help="Write to this file instead of stdout.")
+@click.option("--driver", help="Read with this driver instead of guessing.")
+@click.option("--library", type=click.Path(), help="Symbol library for the names.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
+@run_guarded
+def printout(path, output, driver, library, overwrite):
+    """Symbol legend, symbols by code, line points with references, and texts."""
+    from pathlib import Path
+
+    import apygis
+    from apygis.errors import FileOverwriteError
+    from apygis.formats._io import atomic_write_many
+    from apygis.formats.printout import printout_text
+    from apygis.model.symbols import load_library
+
+    m = apygis.read(path, driver=driver)
+    text = printout_text(m, load_library(library))
+    if output is None:
+        click.echo(text, nl=False)
+        return
+    if Path(output).exists() and not overwrite:
+        raise FileOverwriteError(f"{output} exists; use --overwrite to replace it")
+    atomic_write_many({Path(output): text.encode("utf-8")})
+    click.echo(f"print-out of {m.id} written to {output}")

@@ -1,0 +1,209 @@
+"""The editing API of Layer and MapFile: numbers, references, and their repair."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import apygis
+from apygis.errors import ApygisError, RecordError, RecordNotFoundError, TopologyError
+from apygis.model.records import NO_REF
+
+
+def refs(layer, num):
+    lp = layer.line_points
+    r = lp[lp["num"] == num][0]
+    return int(r["fwd"]), int(r["back"]), int(r["side1"]), int(r["side2"])
+
+
+def test_add_records_number_from_one_per_table():
+    lay = apygis.MapFile("T").layer("r")
+    assert lay.add_symbol(1, 2, 3, 7) == 1
+    assert lay.add_symbol(1, 2, 3, 0) == 2
+    assert lay.add_text(1, 2, 3, "Kirchweg") == 1
+    assert lay.add_line([(0, 0, 0), (1, 0, 0), (2, 0, 0)], code=12) == [1, 2, 3]
+    assert refs(lay, 1) == (2, NO_REF, NO_REF, NO_REF)
+    assert refs(lay, 2) == (3, 1, NO_REF, NO_REF)
+    assert refs(lay, 3) == (NO_REF, 2, NO_REF, NO_REF)
+    assert lay.validate() == []
+
+
+def test_closed_line_links_last_to_first():
+    lay = apygis.MapFile("T").layer("r")
+    n = lay.add_line([(0, 0, 0), (0, 5, 0), (5, 5, 0)], code=21, closed=True)
+    assert refs(lay, n[0])[:2] == (n[1], n[2])
+    assert refs(lay, n[2])[:2] == (n[0], n[1])
+    assert lay.counts()["closed_lines"] == 1
+    with pytest.raises(TopologyError, match="at least three points"):
+        lay.add_line([(0, 0, 0), (1, 1, 1)], code=21, closed=True)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda lay: lay.add_symbol(0, 0, 0, 100), "0 to 99"),
+        (lambda lay: lay.add_symbol(0, 0, 0, -1), "0 to 99"),
+        (lambda lay: lay.add_symbol(0, 0, 0, 3.0), "integer"),
+        (lambda lay: lay.add_symbol(math.nan, 0, 0, 3), "finite"),
+        (lambda lay: lay.add_symbol("a", 0, 0, 3), "numbers"),
+        (lambda lay: lay.add_text(0, 0, 0, "x" * 25), "at most 24"),
+        (lambda lay: lay.add_text(0, 0, 0, "a\nb"), "control"),
+        (lambda lay: lay.add_line([], 3), "one or more"),
+        (lambda lay: lay.add_line([(0, 0)], 3), "one or more"),
+    ],
+)
+def test_bad_arguments_raise_record_error(call, match):
+    lay = apygis.MapFile("T").layer("r")
+    with pytest.raises(RecordError, match=match):
+        call(lay)
+    assert len(lay) == 0
+
+
+def test_map_header_validation():
+    with pytest.raises(ApygisError, match="map ID"):
+        apygis.MapFile("bad id")
+    with pytest.raises(ApygisError, match="positive integer"):
+        apygis.MapFile("T", scale=0)
+    with pytest.raises(ApygisError, match="coordinate reference system"):
+        apygis.MapFile("T", crs="EPSG:999999999")
+    with pytest.raises(ApygisError, match="1 to 3 letters"):
+        apygis.MapFile("T").layer("road")
+    m = apygis.MapFile("T", scale=5000, crs=2056)
+    assert m.crs.to_epsg() == 2056
+    assert m.layer("R") is m.layer("r")
+
+
+def test_numbers_fill_apy_range_then_continue():
+    lay = apygis.MapFile("T").layer("r")
+    nums = lay.add_line([(float(i), 0.0, 0.0) for i in range(9999)], code=1)
+    assert nums[-1] == 9999
+    assert lay.add_line([(0, 1, 0)], code=1) == [0]  # the 10000th point takes the free 0
+    assert lay.add_line([(0, 2, 0)], code=1) == [10000]  # beyond: only the APY format refuses
+    lay.delete_line_point(17)
+    assert lay.add_symbol(0, 0, 0, 1) == 1
+    assert lay.add_line([(0, 3, 0)], code=1) == [17]  # the lowest free number is reused
+
+
+def test_extend_line_at_either_end():
+    lay = apygis.MapFile("T").layer("h")
+    a = lay.add_line([(0, 0, 0)], code=31)
+    b = lay.extend_line(a[0], [(1, 0, 0), (2, 0, 0)])
+    assert refs(lay, a[0])[:2] == (b[0], NO_REF)
+    c = lay.extend_line(a[0], [(-1, 0, 0)])  # a[0] has a forward neighbour: grow at the start
+    assert refs(lay, a[0])[:2] == (b[0], c[0])
+    assert refs(lay, c[0])[:2] == (a[0], NO_REF)
+    assert lay.closure(b[-1]).points == (c[0], a[0], *b)
+    with pytest.raises(TopologyError, match="not the end"):
+        lay.extend_line(a[0], [(5, 5, 5)])
+
+
+def test_split_inserts_between_neighbours_in_either_order():
+    lay = apygis.MapFile("T").layer("r")
+    n = lay.add_line([(0, 0, 0), (10, 0, 0), (20, 0, 0)], code=12)
+    s = lay.split(n[1], n[0], (5.0, 0.0, 0.0))  # given backwards
+    assert lay.closure(n[0]).points == (n[0], s, n[1], n[2])
+    assert lay.line_points[lay.line_points["num"] == s]["code"][0] == 12
+    with pytest.raises(TopologyError, match="not neighbours"):
+        lay.split(n[0], n[2], (1, 1, 1))
+    assert lay.validate() == []
+
+
+def test_join_makes_branch_and_closes_ring():
+    lay = apygis.MapFile("T").layer("r")
+    main = lay.add_line([(0, 0, 0), (10, 0, 0), (20, 0, 0)], code=11)
+    br = lay.add_line([(10, 10, 0), (10, 20, 0)], code=12)
+    assert lay.join(br[0], main[1]) == "branch"
+    assert refs(lay, br[0])[1] == main[1]
+    assert refs(lay, main[1])[2] == br[0]
+    br2 = lay.add_line([(10, -10, 0)], code=12)
+    assert lay.join(br2[0], main[1]) == "branch"
+    assert refs(lay, main[1])[3] == br2[0]
+    br3 = lay.add_line([(11, -10, 0)], code=12)
+    with pytest.raises(TopologyError, match="two branches"):
+        lay.join(br3[0], main[1])
+    with pytest.raises(TopologyError, match="not the end"):
+        lay.join(main[1], br3[0])
+    ring = lay.add_line([(0, 50, 0), (0, 60, 0), (10, 60, 0)], code=21)
+    assert lay.join(ring[-1], ring[0]) == "closed"
+    assert lay.closure(ring[0]).closed
+    assert lay.validate() == []
+    assert {(b["point"], b["junction"]) for b in lay.branches()} == {
+        (br[0], main[1]),
+        (br2[0], main[1]),
+    }
+
+
+def test_delete_line_point_bridges_the_line():
+    lay = apygis.MapFile("T").layer("r")
+    n = lay.add_line([(0, 0, 0), (10, 0, 0), (20, 0, 0), (30, 0, 0)], code=12)
+    lay.delete_line_point(n[1])
+    assert lay.closure(n[0]).points == (n[0], n[2], n[3])
+    lay.delete_line_point(n[3])  # an end
+    assert refs(lay, n[2])[:2] == (NO_REF, n[0])
+    assert lay.validate() == []
+    with pytest.raises(RecordNotFoundError, match="no line point number 99"):
+        lay.delete_line_point(99)
+
+
+def test_delete_from_ring_of_three_leaves_an_open_line():
+    lay = apygis.MapFile("T").layer("r")
+    n = lay.add_line([(0, 0, 0), (0, 5, 0), (5, 5, 0)], code=21, closed=True)
+    lay.delete_line_point(n[0])
+    c = lay.closure(n[1])
+    assert not c.closed
+    assert c.points == (n[1], n[2])
+    assert lay.validate() == []
+
+
+def test_delete_junction_moves_branch_to_the_heir():
+    lay = apygis.MapFile("T").layer("r")
+    main = lay.add_line([(0, 0, 0), (10, 0, 0), (20, 0, 0)], code=11)
+    br = lay.add_line([(10, 10, 0), (10, 20, 0)], code=12)
+    lay.join(br[0], main[1])
+    lay.delete_line_point(main[1])
+    assert refs(lay, br[0])[1] == main[0]
+    assert refs(lay, main[0])[2] == br[0]
+    assert lay.validate() == []
+    lay.delete_line(main[0])
+    assert refs(lay, br[0])[1] == NO_REF  # no heir left: the branch end is free
+    assert lay.validate() == []
+    assert lay.counts()["lines"] == 1
+
+
+def test_delete_symbol_and_text():
+    lay = apygis.MapFile("T").layer("c")
+    s = lay.add_symbol(0, 0, 0, 1)
+    t = lay.add_text(0, 0, 0, "P1")
+    lay.delete_symbol(s)
+    lay.delete_text(t)
+    assert len(lay) == 0
+    with pytest.raises(RecordNotFoundError, match="no symbol number 1"):
+        lay.delete_symbol(s)
+    with pytest.raises(RecordNotFoundError, match="no text number 1"):
+        lay.delete_text(t)
+
+
+def test_tables_are_read_only_views():
+    lay = apygis.MapFile("T").layer("c")
+    lay.add_symbol(0, 0, 0, 1)
+    with pytest.raises(ValueError, match="read-only"):
+        lay.symbols["code"][0] = 5
+
+
+def test_growth_keeps_earlier_records():
+    lay = apygis.MapFile("T").layer("e")
+    for i in range(1000):
+        lay.add_symbol(i, i, i, 0)
+    assert lay.symbols["num"].tolist() == list(range(1, 1001))
+    assert np.array_equal(lay.symbols["x"], np.arange(1000.0))
+
+
+def test_map_equality_and_copy():
+    m = apygis.MapFile("T", scale=5000, crs="EPSG:2056", notes="n")
+    m.layer("r").add_line([(0, 0, 0), (1, 1, 1)], code=3)
+    c = m.copy()
+    assert c == m
+    c.layer("r").add_symbol(0, 0, 0, 1)
+    assert c != m
