@@ -112,7 +112,9 @@ def make(outdir: Path) -> apygis.MapFile:
         "ZH1091",
         scale=5000,
         crs="EPSG:2056",
-        notes="apygis sample sheet ZH1091, 1:5000, synthetic terrain\nmade by samples/make_samples.py",
+        notes=(
+            "apygis sample sheet ZH1091, 1:5000, synthetic terrain\nmade by samples/make_samples.py"
+        ),
     )
 
     # ---- c: control

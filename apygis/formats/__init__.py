@@ -92,6 +92,12 @@ def _load(name: str, value: str) -> Driver | None:
     mod, _, attr = value.partition(":")
     try:
         drv = getattr(importlib.import_module(mod), attr)
+    except ModuleNotFoundError as exc:
+        if exc.name == mod:  # a stale registration: the module is gone, nothing is broken
+            log.debug("driver %s: module %s is not installed", name, mod)
+            return None
+        log.warning("driver %s (%s) failed to load: %s", name, value, exc)
+        return None
     except Exception as exc:
         log.warning("driver %s (%s) failed to load: %s", name, value, exc)
         return None

@@ -332,13 +332,13 @@ def validate_line_points(lp: np.ndarray) -> list[Issue]:
         back_side = (refs["side1"][jj] == me) | (refs["side2"][jj] == me)
         if f == "fwd":
             good = (refs["back"][jj] == me) | back_side
-            need = "a backward or side reference back to it"
+            need = "backward or side reference back to it"
         elif f == "back":
             good = (refs["fwd"][jj] == me) | back_side
-            need = "a forward or side reference back to it"
+            need = "forward or side reference back to it"
         else:
             good = (refs["fwd"][jj] == me) | (refs["back"][jj] == me) | back_side
-            need = "a reference back to it"
+            need = "reference back to it"
         for i in np.flatnonzero(ok)[~good]:
             out.append(
                 Issue(

@@ -69,3 +69,32 @@ def random_rows(rng: np.random.Generator, n: int):
     lp["fwd"][-1] = -1
     lp["side1"] = lp["side2"] = -1
     return lp
+
+
+def small_map():
+    """A small map with a branch, a ring, a symbol, a text and two layers."""
+    m = apygis.MapFile("FUZZ", scale=5000, crs="EPSG:2056", notes="fuzz")
+    lay = m.layer("r")
+    a = lay.add_line(
+        [
+            (2683000.0, 1247000.0, 420.0),
+            (2683010.5, 1247001.25, 421.0),
+            (2683020.0, 1247003.0, 422.5),
+        ],
+        code=11,
+    )
+    b = lay.add_line([(2683010.0, 1247020.0, 425.0), (2683010.0, 1247010.0, 423.0)], code=12)
+    lay.join(b[-1], a[1])
+    lay.add_line(
+        [
+            (2683100.0, 1247100.0, 430.0),
+            (2683110.0, 1247100.0, 430.0),
+            (2683110.0, 1247110.0, 430.0),
+        ],
+        code=21,
+        closed=True,
+    )
+    lay.add_symbol(2683005.0, 1247005.0, 420.5, 6)
+    lay.add_text(2683006.0, 1247006.0, 420.5, "Kirchweg")
+    m.layer("e").add_symbol(2683050.0, 1247050.0, 431.25, 0)
+    return m

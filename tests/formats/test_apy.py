@@ -203,7 +203,8 @@ def test_header_layout_is_as_documented(sample_dir):
         data
     )
     assert (magic, version, hsize) == (b"APYL", 1, 64)
-    assert ext.rstrip(b"\0") == b"e" and mid.rstrip(b"\0") == b"ZH1091"
+    assert ext.rstrip(b"\0") == b"e"
+    assert mid.rstrip(b"\0") == b"ZH1091"
     assert (scale, ns, nl, nt, res) == (5000, 96, 0, 0, 0)
     assert data[64 : 64 + meta].decode().startswith('{"crs": "EPSG:2056"')
     assert crc == zlib.crc32(data[64:])

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 import apygis
 from apygis.errors import TopologyError
-from apygis.model import topology as T
+from apygis.model import topology as topo
 from apygis.model.records import LINE_DTYPE, NO_REF
 
 
@@ -38,7 +38,7 @@ def test_chains_recover_the_lines_that_were_added(lines, seed):
     # Row order must not matter: shuffle the table.
     lp = lay.line_points.copy()
     np.random.default_rng(seed).shuffle(lp)
-    cs = T.chains(lp)
+    cs = topo.chains(lp)
     got = []
     for k, rows in enumerate(cs):
         nums = tuple(int(v) for v in lp["num"][rows])
@@ -76,7 +76,7 @@ def test_validation_finds_each_kind_of_error():
             (8, NO_REF, NO_REF, NO_REF, NO_REF),  # duplicate number
         ]
     )
-    kinds = {(i.kind, i.num) for i in T.validate_line_points(lp)}
+    kinds = {(i.kind, i.num) for i in topo.validate_line_points(lp)}
     assert ("dangling-reference", 2) in kinds
     assert ("asymmetric-reference", 3) in kinds
     assert ("self-reference", 5) in kinds
@@ -158,13 +158,13 @@ def test_area_of_sample_buildings(sample_map):
 
 
 def test_dhi():
-    d = T.dhi((2684000.0, 1247000.0, 420.0), (2684030.0, 1247040.0, 415.0))
+    d = topo.dhi((2684000.0, 1247000.0, 420.0), (2684030.0, 1247040.0, 415.0))
     assert d.distance_m == pytest.approx(50.0)
     assert d.dz_m == pytest.approx(-5.0)
     assert d.slope_distance_m == pytest.approx(math.hypot(50, 5))
     assert d.inclination_pct == pytest.approx(-10.0)
     assert d.inclination_deg == pytest.approx(math.degrees(math.atan(-0.1)))
-    assert T.dhi((0, 0, 0), (0, 0, 3)).inclination_pct is None
+    assert topo.dhi((0, 0, 0), (0, 0, 3)).inclination_pct is None
 
 
 def test_geometries_are_3d_lines_and_polygons():
@@ -173,15 +173,18 @@ def test_geometries_are_3d_lines_and_polygons():
     lay.add_line([(0, 0, 5), (0, 10, 5), (10, 10, 5)], code=21, closed=True)
     lay.add_line([(7, 7, 7)], code=13)
     g = lay.geometries()
-    assert g[0].geom_type == "LineString" and g[0].has_z
+    assert g[0].geom_type == "LineString"
+    assert g[0].has_z
     assert shapely.get_coordinates(g[0], include_z=True).tolist() == [[0, 0, 1], [10, 0, 2]]
-    assert g[1].geom_type == "Polygon" and g[1].has_z and g[1].area == 50.0
+    assert g[1].geom_type == "Polygon"
+    assert g[1].has_z
+    assert g[1].area == 50.0
     assert g[2].is_empty
 
 
 def test_lookup_and_mutual_links_with_missing_numbers():
     lp = _table([(5, 6, NO_REF, NO_REF, NO_REF), (6, NO_REF, 5, NO_REF, NO_REF)])
-    succ, pred = T.mutual_links(lp)
+    succ, pred = topo.mutual_links(lp)
     assert succ.tolist() == [1, -1]
     assert pred.tolist() == [-1, 0]
-    assert T.lookup(lp["num"], np.array([6, 7])).tolist() == [1, -1]
+    assert topo.lookup(lp["num"], np.array([6, 7])).tolist() == [1, -1]

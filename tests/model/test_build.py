@@ -1,0 +1,129 @@
+"""Polylines out and back in: export_lines and the topology rebuild of add_lines."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+
+import apygis
+from apygis.errors import RecordError
+from apygis.model.build import add_lines, export_lines
+from tests.formats.strategies import layers
+
+
+def _shape(layer):
+    """What the topology rebuild must preserve: chains' coordinates, rings, branches."""
+    lp = layer.line_points
+    cs = layer.chains()
+    chains = []
+    for k, rows in enumerate(cs):
+        pts = [
+            tuple(np.round(p, 6))
+            for p in zip(lp["x"][rows], lp["y"][rows], lp["z"][rows], strict=True)
+        ]
+        if cs.closed[k]:
+            i = pts.index(min(pts))
+            pts = pts[i:] + pts[:i]
+        chains.append((bool(cs.closed[k]), tuple(pts)))
+    num_xy = {
+        int(n): (round(x, 6), round(y, 6))
+        for n, x, y in zip(lp["num"], lp["x"], lp["y"], strict=True)
+    }
+    br = sorted((num_xy[b["point"]], num_xy[b["junction"]], b["end"]) for b in layer.branches())
+    return sorted(chains), br
+
+
+def test_sample_layers_survive_export_and_rebuild(sample_map):
+    for lay in sample_map:
+        if not len(lay.line_points):
+            continue
+        ls = export_lines(lay)
+        fresh = apygis.Layer(lay.ext)
+        add_lines(fresh, [p.coords for p in ls], [p.code for p in ls], [p.closed for p in ls])
+        assert _shape(fresh) == _shape(lay), lay.ext
+        assert fresh.validate() == []
+        keys = ("line_points", "lines", "closed_lines")
+        assert [fresh.counts()[k] for k in keys] == [lay.counts()[k] for k in keys]
+
+
+def test_export_appends_junctions_and_keeps_rings_unrepeated():
+    lay = apygis.Layer("h")
+    main = lay.add_line([(0, 0, 0), (10, 0, 0), (20, 0, 0)], code=31)
+    trib = lay.add_line([(10, 9, 1), (10, 4, 1)], code=32)
+    lay.join(trib[-1], main[1])
+    lay.add_line([(0, 50, 2), (0, 60, 2), (9, 60, 2)], code=35, closed=True)
+    ls = export_lines(lay)
+    assert [p.closed for p in ls] == [False, False, True]
+    assert ls[1].nums == (*trib, main[1])
+    assert ls[1].coords[-1].tolist() == [10.0, 0.0, 0.0]
+    assert len(ls[2].coords) == 3
+    assert ls.line_index().tolist() == [0, 0, 0, 1, 1, 1, 2, 2, 2]
+
+
+def test_gis_lines_meeting_end_to_start_merge_and_closed_rings_close():
+    lay = apygis.Layer("r")
+    # two features that together form one road, then a ring digitised with a repeated vertex
+    a = [(0, 0, 0), (10, 0, 0)]
+    b = [(10, 0, 0), (20, 0, 0), (30, 5, 0)]
+    ring = [(0, 10, 0), (0, 20, 0), (10, 20, 0), (10, 10, 0), (0, 10.001, 0)]
+    add_lines(lay, [a, b, ring], [11, 11, 21])
+    c = lay.counts()
+    assert (c["lines"], c["closed_lines"], c["line_points"]) == (2, 1, 8)
+    cs = lay.chains()
+    lp = lay.line_points
+    assert lp["x"][cs.rows(0)].tolist() == [0, 10, 20, 30]
+    assert lay.area(*[int(v) for v in lp["num"][cs.rows(1)][:2]]).area_m2 == pytest.approx(100.0)
+    assert lay.validate() == []
+
+
+def test_three_lines_at_a_point_give_a_chain_and_a_branch():
+    lay = apygis.Layer("r")
+    add_lines(lay, [[(0, 0), (5, 5)], [(10, 0), (5, 5)], [(5, 5), (5, 10)]], 12)
+    assert lay.counts()["lines"] == 2
+    assert len(lay.branches()) == 1
+    assert len(lay.line_points) == 4  # the meeting point once, plus the three far ends
+    assert lay.validate() == []
+
+
+def test_lines_join_existing_layer_points():
+    lay = apygis.Layer("h")
+    main = lay.add_line([(0, 0, 0), (10, 0, 0), (20, 0, 0)], code=31)
+    nums = add_lines(lay, [[(10, 8, 0), (10, 0.003, 0)]], 32)
+    assert nums[0] == [4]
+    lp = lay.line_points
+    assert lp["fwd"][lp["num"] == 4][0] == main[1]
+    assert lp["side1"][lp["num"] == main[1]][0] == 4
+    assert lay.validate() == []
+
+
+def test_tolerance_and_bad_input():
+    lay = apygis.Layer("r")
+    add_lines(lay, [[(0, 0), (10, 0)], [(10.2, 0), (20, 0)]], 1, tolerance_m=0.1)
+    assert lay.counts()["lines"] == 2
+    lay2 = apygis.Layer("r")
+    add_lines(lay2, [[(0, 0), (10, 0)], [(10.2, 0), (20, 0)]], 1, tolerance_m=0.5)
+    assert lay2.counts()["lines"] == 1
+    with pytest.raises(RecordError, match="0-99"):
+        add_lines(lay, [[(0, 0), (1, 1)]], 100)
+    with pytest.raises(RecordError, match="array of vertices"):
+        add_lines(lay, [[0, 1, 2]], 1)
+
+
+@settings(max_examples=80, deadline=None)
+@given(lay=layers("r"))
+def test_property_export_rebuild_keeps_geometry(lay):
+    ls = export_lines(lay)
+    fresh = apygis.Layer("r")
+    add_lines(fresh, [p.coords for p in ls], [p.code for p in ls], [p.closed for p in ls], 0.0)
+    # random coordinates may coincide by chance only at exact duplicates; the vertices
+    # (as a multiset) and the ring count are preserved whatever gets merged
+    assert sorted(map(tuple, np.round(fresh_xyz(fresh), 6))) == sorted(
+        map(tuple, np.round(fresh_xyz(lay), 6))
+    )
+    assert fresh.counts()["closed_lines"] == lay.counts()["closed_lines"]
+
+
+def fresh_xyz(lay):
+    lp = lay.line_points
+    return np.column_stack([lp["x"], lp["y"], lp["z"]])
