@@ -28,7 +28,7 @@ import numpy as np
 import apygis
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from tests.formats.strategies import random_rows  # noqa: E402
+from tests.formats.strategies import random_rows
 
 
 def make_map(n_layers: int) -> apygis.MapFile:
@@ -68,7 +68,8 @@ def main() -> None:
             figures[f"{fmt}_read_records_per_s"] = round(n / tr)
             print(
                 f"{fmt:<7} {n} line points in {args.layers} layers, {size / 1e6:.1f} MB: "
-                f"write {tw:.3f} s ({n / tw / 1e6:.2f} M/s), read {tr:.3f} s ({n / tr / 1e6:.2f} M/s)"
+                f"write {tw:.3f} s ({n / tw / 1e6:.2f} M/s), "
+                f"read {tr:.3f} s ({n / tr / 1e6:.2f} M/s)"
             )
     print(json.dumps(figures))
 
