@@ -1,38 +1,98 @@
-"""``apygis convert``: from one format to another."""
+"""``apygis convert``: from one format to another, one file or many."""
 
 from __future__ import annotations
 
+import sys
+
 import click
 
-from apygis.cli._common import run_guarded
+from apygis.cli._common import progress_bar, run_guarded
+
+
+def _layer_map(ctx, param, value):
+    if value is None:
+        return None
+    out = {}
+    for part in value.split(","):
+        name, sep, ext = part.partition("=")
+        if not sep or not name.strip() or not ext.strip():
+            raise click.BadParameter(f"expected NAME=EXT[,NAME=EXT...], not {value!r}")
+        out[name.strip()] = ext.strip()
+    return out
 
 
 @click.command()
-@click.argument("src", type=click.Path())
-@click.argument("dst", type=click.Path())
-@click.option("--driver", help="Output driver (default: from DST's extension).")
-@click.option("--src-driver", help="Input driver (default: from SRC's content or extension).")
+@click.argument("paths", nargs=-1, required=True, type=click.Path())
+@click.option("--to", "to_format", help="Output driver; DST is then a folder (batch mode).")
+@click.option("--driver", help="Output driver for a single DST (default: from its extension).")
+@click.option("--src-driver", help="Input driver (default: from content or extension).")
+@click.option("--to-crs", help="Reproject to this CRS (EPSG:XXXX, WKT, PROJ string).")
+@click.option("--layer-map", callback=_layer_map, help="Input layer to map layer: ROADS=r,WATER=h.")
+@click.option(
+    "--snap", type=float, help="Tolerance in metres for rebuilding line topology on import."
+)
+@click.option("-j", "--jobs", type=click.IntRange(1), default=1, help="Parallel processes.")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files.")
 @run_guarded
-def convert(src: str, dst: str, driver: str | None, src_driver: str | None, overwrite: bool):
-    """Convert the map SRC to DST.
+def convert(paths, to_format, driver, src_driver, to_crs, layer_map, snap, jobs, overwrite):
+    """Convert SRC to DST, or many SRC... into the folder DST with --to FORMAT.
+
+    \b
+      apygis convert samples/ZH1091 out/sheet.apa
+      apygis convert --to gpkg -j 2 'in/*.dxf' in/ZH1091 out/
 
     An APY native map is named dir/ID (all layer files dir/ID.*) or dir/ID.ext
-    (one layer). Existing outputs are refused without --overwrite.
+    (one layer). Nothing is overwritten without --overwrite. In batch mode a
+    file that fails is reported and the others go on; the exit code is 1 if
+    any failed.
     """
-    import apygis
-    from apygis.errors import FileOverwriteError
-    from apygis.formats import driver_for, get_driver
+    from pathlib import Path
 
-    m = apygis.read(src, driver=src_driver)
-    out_drv = get_driver(driver, "w") if driver else driver_for(dst, "w")
-    if not overwrite:
-        existing = [str(p) for p in out_drv.targets(m, dst) if p.exists()]
-        if existing:
-            raise FileOverwriteError(f"{', '.join(existing)} exists; use --overwrite to replace it")
-    written = apygis.write(m, dst, driver=out_drv.name)
-    n = sum(len(lay) for lay in m)
-    click.echo(
-        f"{src} -> {', '.join(map(str, written))} ({out_drv.name}): "
-        f"{len(m.layers)} layers, {n} records"
-    )
+    from apygis.formats.batch import convert_file, convert_many, expand_sources
+
+    if len(paths) < 2:
+        raise click.UsageError("give SRC and DST (or SRC... DST with --to FORMAT)")
+    *srcs, dst = paths
+    read_options = {}
+    if layer_map:
+        read_options["layer_map"] = layer_map
+    if snap is not None:
+        read_options["tolerance_m"] = snap
+    common = {
+        "src_driver": src_driver,
+        "overwrite": overwrite,
+        "to_crs": to_crs,
+        "read_options": read_options,
+    }
+    sources = expand_sources(srcs)
+    batch = to_format is not None or len(sources) > 1 or Path(dst).is_dir()
+    if not batch:
+        res = convert_file(sources[0], dst, driver=driver, **common)
+        if not res.ok:
+            raise click.ClickException(res.error)
+        click.echo(
+            f"{res.source} -> {', '.join(res.outputs)}: {res.layers} layers, {res.records} records"
+        )
+        return
+    if to_format is None:
+        raise click.UsageError("converting several files needs --to FORMAT")
+    failed = []
+    with progress_bar(len(sources), f"converting to {to_format}") as bar:
+
+        def report(res):
+            bar.update(1)
+            if not res.ok:
+                failed.append(res)
+
+        results = convert_many(sources, dst, to_format, jobs=jobs, progress=report, **common)
+    for res in results:
+        if res.ok:
+            click.echo(
+                f"{res.source} -> {', '.join(res.outputs)}: "
+                f"{res.layers} layers, {res.records} records"
+            )
+        else:
+            click.echo(f"FAILED {res.source}: {res.error}", err=True)
+    click.echo(f"{len(results) - len(failed)} converted, {len(failed)} failed")
+    if failed:
+        sys.exit(1)

@@ -1,0 +1,191 @@
+"""Convert many map files: one process per job, a result per file, no file lost.
+
+>>> from apygis.formats.batch import output_name
+>>> output_name("in/roads.dxf", "gpkg"), output_name("in/ZH1091", "gpkg")
+('roads.gpkg', 'ZH1091.gpkg')
+>>> output_name("in/ZH1091.c", "dxf"), output_name("in/ZH1091.c", "apy")
+('ZH1091.c.dxf', 'ZH1091.c')
+"""
+
+from __future__ import annotations
+
+import glob
+import inspect
+import logging
+import os
+from collections.abc import Callable, Iterable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from apygis.errors import ApygisError, FileOverwriteError
+
+__all__ = ["Result", "convert_file", "convert_many", "expand_sources", "output_name"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Result:
+    """What happened to one source: the files written, or why it failed."""
+
+    source: str
+    outputs: list[str] = field(default_factory=list)
+    records: int = 0
+    layers: int = 0
+    error: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+def expand_sources(patterns: Iterable[str]) -> list[str]:
+    """Files and globs, expanded and de-duplicated in the order given.
+
+    A pattern with ``*``, ``?`` or ``[`` that matches nothing is kept as it
+    is, so that its conversion fails with "no such file" rather than being
+    silently skipped.
+    """
+    out: list[str] = []
+    for pat in patterns:
+        hits = sorted(glob.glob(pat)) if glob.has_magic(pat) else [pat]
+        for h in hits or [pat]:
+            if h not in out:
+                out.append(h)
+    return out
+
+
+def output_name(source: str, to_driver: str) -> str:
+    """The output file name for ``source`` converted by ``to_driver``.
+
+    A source extension that names a known format is replaced by the output
+    driver's first extension; any other (an APY layer extension such as
+    ``.c``) is kept, so that the layers of one map do not collide.
+    """
+    from apygis.formats import drivers, get_driver
+
+    p = Path(source)
+    known = {e for d in drivers().values() for e in d.extensions}
+    base = p.stem if p.suffix[1:].lower() in known else p.name
+    exts = get_driver(to_driver).extensions
+    return f"{base}.{exts[0]}" if exts else base
+
+
+def _accepted(func: Callable, options: dict) -> dict:
+    """The options a driver function takes (others are dropped with a debug note)."""
+    params = inspect.signature(func).parameters
+    if any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        return dict(options)
+    kept = {k: v for k, v in options.items() if k in params}
+    for k in set(options) - set(kept):
+        log.debug("%s does not take the option %s", func.__qualname__, k)
+    return kept
+
+
+def convert_file(
+    src: str,
+    dst: str,
+    *,
+    src_driver: str | None = None,
+    driver: str | None = None,
+    overwrite: bool = False,
+    to_crs=None,
+    read_options: dict | None = None,
+) -> Result:
+    """Convert one file; errors a user can cause come back in ``Result.error``."""
+    import apygis
+    from apygis.formats import driver_for, get_driver
+
+    try:
+        in_drv = get_driver(src_driver, "r") if src_driver else driver_for(src, "r")
+        m = in_drv.reader(os.fspath(src), **_accepted(in_drv.reader, read_options or {}))
+        if to_crs is not None:
+            from apygis.model.transform import reproject
+
+            m = reproject(m, to_crs)
+        out_drv = get_driver(driver, "w") if driver else driver_for(dst, "w")
+        if not overwrite:
+            existing = [str(p) for p in out_drv.targets(m, dst) if p.exists()]
+            if existing:
+                raise FileOverwriteError(f"{', '.join(existing)} exists; use --overwrite")
+        written = apygis.write(m, dst, driver=out_drv.name)
+        return Result(src, [str(p) for p in written], sum(len(lay) for lay in m), len(m.layers))
+    except ApygisError as exc:
+        return Result(src, error=str(exc))
+    except OSError as exc:
+        return Result(src, error=f"{exc.strerror or exc}: {exc.filename or src}")
+
+
+def convert_many(
+    sources: Iterable[str],
+    outdir,
+    to_driver: str,
+    *,
+    jobs: int = 1,
+    progress: Callable[[Result], None] | None = None,
+    **kwargs,
+) -> list[Result]:
+    """Convert every source into ``outdir`` with ``to_driver``; one failure stops nothing.
+
+    Parameters
+    ----------
+    sources : iterable of str
+        Files (or APY ``dir/ID`` names); see :func:`expand_sources` for globs.
+    outdir : path
+        The output folder, created if missing.
+    to_driver : str
+        Output driver name.
+    jobs : int
+        Worker processes (1: convert in this process).
+    progress : callable, optional
+        Called with each :class:`Result` as it completes.
+    **kwargs
+        Passed to :func:`convert_file` (``overwrite``, ``src_driver``,
+        ``to_crs``, ``read_options``).
+
+    Returns
+    -------
+    list of Result, in the order of ``sources``.
+    """
+    from apygis.formats import get_driver
+
+    get_driver(to_driver, "w")  # fail early on a bad name
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    sources = list(sources)
+    targets: dict[str, str] = {}
+    results: dict[int, Result] = {}
+    plan = []
+    for i, src in enumerate(sources):
+        name = output_name(src, to_driver)
+        if name in targets:
+            results[i] = Result(src, error=f"output {name} would collide with {targets[name]}")
+            if progress:
+                progress(results[i])
+            continue
+        targets[name] = src
+        plan.append((i, src, str(outdir / name)))
+
+    def done(i, res):
+        results[i] = res
+        if progress:
+            progress(res)
+
+    if jobs <= 1 or len(plan) <= 1:
+        for i, src, dst in plan:
+            done(i, convert_file(src, dst, driver=to_driver, **kwargs))
+    else:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futs = {
+                pool.submit(convert_file, src, dst, driver=to_driver, **kwargs): (i, src)
+                for i, src, dst in plan
+            }
+            for fut in as_completed(futs):
+                i, src = futs[fut]
+                try:
+                    res = fut.result()
+                except Exception as exc:  # a worker died: report, go on with the others
+                    res = Result(src, error=f"{type(exc).__name__}: {exc}")
+                done(i, res)
+    return [results[i] for i in range(len(sources))]

@@ -1,0 +1,80 @@
+"""Batch conversion: many inputs, an output folder, parallel jobs, failures reported."""
+
+from __future__ import annotations
+
+from click.testing import CliRunner
+
+import apygis
+from apygis.cli import main
+from apygis.formats.batch import convert_many, expand_sources
+
+
+def _run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+
+
+def _inputs(sample_dir, tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    for i in range(3):
+        m = apygis.read(sample_dir / "ZH1091")
+        m.id = f"S{i}"
+        apygis.write(m, src / f"sheet{i}.apa")
+    (src / "junk.apa").write_text("APY ASCII 1\nMAP X\nLAYER r\nSYMBOLS 1\nbroken\nEND\n")
+    return src
+
+
+def test_batch_with_jobs_reports_the_failure_and_converts_the_rest(sample_dir, tmp_path):
+    src = _inputs(sample_dir, tmp_path)
+    out = tmp_path / "out"
+    res = _run("convert", "--to", "apy", "-j", "2", src / "*.apa", sample_dir / "ZH1091.c", out)
+    assert res.exit_code == 1
+    assert "FAILED" in res.output
+    assert "junk.apa" in res.output
+    assert "line 5" in res.output
+    assert "4 converted, 1 failed" in res.output
+    for i in range(3):
+        m = apygis.read(out / f"sheet{i}")
+        assert m.id == f"S{i}"
+        assert sorted(m.layers) == ["c", "e", "h", "r"]
+    assert sorted(apygis.read(out / "ZH1091.c").layers) == ["c"]
+
+
+def test_batch_refuses_to_overwrite_then_overwrites(sample_dir, tmp_path):
+    out = tmp_path / "out"
+    assert _run("convert", "--to", "ascii", sample_dir / "ZH1091", out).exit_code == 0
+    res = _run("convert", "--to", "ascii", sample_dir / "ZH1091", out)
+    assert res.exit_code == 1
+    assert "exists; use --overwrite" in res.output
+    res = _run("convert", "--to", "ascii", "--overwrite", sample_dir / "ZH1091", out)
+    assert res.exit_code == 0
+    assert apygis.read(out / "ZH1091.apa") == apygis.read(sample_dir / "ZH1091")
+
+
+def test_library_batch_results_in_source_order(sample_dir, tmp_path):
+    srcs = [
+        str(sample_dir / "ZH1091.apa"),
+        str(tmp_path / "missing.apa"),
+        str(sample_dir / "ZH1091"),
+    ]
+    seen = []
+    results = convert_many(srcs, tmp_path / "o", "apy", jobs=2, progress=seen.append)
+    assert [r.source for r in results] == srcs
+    assert [r.ok for r in results] == [True, False, False]
+    assert "no such file" in results[1].error
+    assert "collide" in results[2].error  # ZH1091.apa and ZH1091 both make ZH1091
+    assert len(seen) == 3
+
+
+def test_expand_sources_keeps_unmatched_globs(tmp_path):
+    (tmp_path / "a.apa").write_text("")
+    got = expand_sources([str(tmp_path / "*.apa"), str(tmp_path / "*.nothing")])
+    assert got == [str(tmp_path / "a.apa"), str(tmp_path / "*.nothing")]
+
+
+def test_usage_errors():
+    res = _run("convert", "only-one")
+    assert res.exit_code == 2
+    res = _run("convert", "a.apa", "b.apa", "out")
+    assert res.exit_code == 2
+    assert "--to FORMAT" in res.output
