@@ -1,0 +1,1 @@
+"""Compilation: the engine (a pure state machine) and the session around it."""
