@@ -1,10 +1,10 @@
 """Convert many map files: one process per job, a result per file, no file lost.
 
 >>> from apygis.formats.batch import output_name
->>> output_name("in/roads.dxf", "gpkg"), output_name("in/ZH1091", "gpkg")
-('roads.gpkg', 'ZH1091.gpkg')
->>> output_name("in/ZH1091.c", "dxf"), output_name("in/ZH1091.c", "apy")
-('ZH1091.c.dxf', 'ZH1091.c')
+>>> output_name("in/sheet.apa", "apy"), output_name("in/ZH1091", "ascii")
+('sheet', 'ZH1091.apa')
+>>> output_name("in/ZH1091.c", "ascii"), output_name("in/ZH1091.c", "apy")
+('ZH1091.c.apa', 'ZH1091.c')
 """
 
 from __future__ import annotations
