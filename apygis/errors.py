@@ -20,8 +20,11 @@ __all__ = [
     "DriverError",
     "FileOverwriteError",
     "FormatError",
+    "InstrumentError",
     "MeasurementError",
+    "MotorError",
     "OrientationError",
+    "ProtocolError",
     "RecordError",
     "RecordNotFoundError",
     "SymbolLibraryError",
@@ -113,3 +116,42 @@ class MeasurementError(OrientationError):
 
 class ConvergenceError(OrientationError):
     """An iterative solution (Gauss-Newton, Newton inverse) did not converge."""
+
+
+class ProtocolError(ApygisError, ValueError):
+    """Bytes or values do not fit an instrument protocol.
+
+    A report that a tablet format cannot carry (a button code above the
+    format's range, a coordinate too large for its bit field), an unknown
+    protocol or button name, a G-code word the motor dialect does not allow.
+    """
+
+
+class InstrumentError(ApygisError, OSError):
+    """An instrument (tablet, motor controller, serial port) failed to do its part."""
+
+
+class MotorError(InstrumentError):
+    """The plate motor controller refused a command, raised an alarm or did not answer.
+
+    Parameters
+    ----------
+    message : str
+        What happened.
+    port : str, optional
+        The serial port or URL, prefixed to the message.
+    line : str, optional
+        The G-code line that was sent, when there is one.
+    code : int, optional
+        The grbl ``error:N`` code.
+    alarm : int, optional
+        The grbl ``ALARM:N`` code.
+    """
+
+    def __init__(self, message: str, *, port=None, line=None, code=None, alarm=None):
+        self.port = None if port is None else str(port)
+        self.line = line
+        self.code = code
+        self.alarm = alarm
+        self.reason = message
+        super().__init__(f"{self.port}: {message}" if self.port else message)
