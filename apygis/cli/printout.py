@@ -1,4 +1,4 @@
-"""``apygis printout``: the APY print-out of a map file."""
+"""``apygis printout``: the APY print-out of a map file, as text or as a PDF."""
 
 from __future__ import annotations
 
@@ -9,13 +9,22 @@ from apygis.cli._common import run_guarded
 
 @click.command()
 @click.argument("path", type=click.Path())
-@click.option("-o", "--output", type=click.Path(), help="Write to this file instead of stdout.")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(),
+    help="Write to this file instead of stdout (.pdf: A4 pages in Courier).",
+)
 @click.option("--driver", help="Read with this driver instead of guessing.")
 @click.option("--library", type=click.Path(), help="Symbol library for the names.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
 @run_guarded
 def printout(path, output, driver, library, overwrite):
-    """Symbol legend, symbols by code, line points with references, and texts."""
+    """Symbol legend, symbols by code, line points with references, and texts.
+
+    With -o NAME.pdf the print-out is a PDF of numbered A4 pages in a
+    monospaced font; any other name gets plain UTF-8 text.
+    """
     from pathlib import Path
 
     import apygis
@@ -31,5 +40,13 @@ def printout(path, output, driver, library, overwrite):
         return
     if Path(output).exists() and not overwrite:
         raise FileOverwriteError(f"{output} exists; use --overwrite to replace it")
+    if Path(output).suffix.lower() == ".pdf":
+        from apygis.formats.pdf import text_pages, text_pages_pdf
+
+        data = text_pages_pdf(text, title=f"APY print-out {m.id}")
+        atomic_write_many({Path(output): data})
+        n = len(text_pages(text))
+        click.echo(f"print-out of {m.id} written to {output} ({n} A4 pages)")
+        return
     atomic_write_many({Path(output): text.encode("utf-8")})
     click.echo(f"print-out of {m.id} written to {output}")
