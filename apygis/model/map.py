@@ -365,11 +365,9 @@ class Layer:
         mutual_f = fi is not None and lp["back"][fi] == num
         if mutual_b and mutual_f and bi != fi:
             ring_of_three = lp["fwd"][fi] == b and lp["back"][bi] == f
-            if ring_of_three:  # what is left are two points: an open line
-                lp["fwd"][bi] = f
-                lp["back"][fi] = b
-                lp["back"][bi] = NO_REF
-                lp["fwd"][fi] = NO_REF
+            if ring_of_three:  # the two points left keep their link: an open line
+                lp["fwd"][bi] = NO_REF
+                lp["back"][fi] = NO_REF
             else:
                 lp["fwd"][bi] = f
                 lp["back"][fi] = b
