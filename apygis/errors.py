@@ -14,6 +14,7 @@ from __future__ import annotations
 
 __all__ = [
     "ApygisError",
+    "CRSError",
     "CapacityError",
     "ConvergenceError",
     "DegenerateGeometryError",
@@ -64,6 +65,10 @@ class ValueRangeError(FormatError):
 
 class CapacityError(ApygisError, OverflowError):
     """A table holds more records than a format (or an instrument) can take."""
+
+
+class CRSError(ApygisError, ValueError):
+    """A map has no CRS, a CRS is not valid, or points cannot be transformed."""
 
 
 class DriverError(ApygisError, ValueError):

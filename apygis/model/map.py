@@ -29,7 +29,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from apygis.errors import RecordError, RecordNotFoundError, TopologyError
+from apygis.errors import CRSError, RecordError, RecordNotFoundError, TopologyError
 from apygis.model import topology
 from apygis.model.records import (
     APY_CAPACITY,
@@ -529,12 +529,12 @@ class MapFile:
     def crs(self, value) -> None:
         if value is not None:
             from pyproj import CRS
-            from pyproj.exceptions import CRSError
+            from pyproj.exceptions import CRSError as ProjCRSError
 
             try:
                 value = CRS.from_user_input(value)
-            except CRSError as exc:
-                raise RecordError(f"not a coordinate reference system: {value!r} ({exc})") from None
+            except (ProjCRSError, TypeError) as exc:
+                raise CRSError(f"not a coordinate reference system: {value!r} ({exc})") from None
         self._crs = value
 
     @property

@@ -1,0 +1,1403 @@
+"""OGR drivers through pyogrio: GeoPackage, Shapefile, GeoJSON and FlatGeobuf.
+
+The schema is specified in ``docs/formats/ogr.md``. In short, every map layer
+``L`` becomes up to five OGR layers (only the non-empty ones are written):
+
+============== ============= ==================================================
+OGR layer      geometry      fields
+============== ============= ==================================================
+L_symbols      Point Z       num, code, name (symbol name, default library)
+L_lines        LineString Z  code, npoints, points (``"1,2,3"``): open lines
+L_areas        Polygon Z     code, npoints, points: closed lines
+L_texts        Point Z       num, text
+L_line_points  Point Z       num, code, fwd, back, side1, side2 (-1: none)
+============== ============= ==================================================
+
+plus a table ``apygis_map`` without geometry (apygis, id, scale, crs, notes,
+layers) for the map header. ``L_lines`` and ``L_areas`` are for GIS users; a
+reader rebuilds the map from ``L_symbols``, ``L_texts`` and ``L_line_points``
+(record for record, point numbers and references included).
+
+GeoPackage holds all of them in one file, OGR layer names as above. The
+single-layer formats write one file per OGR layer into a directory:
+``write(m, "out/")`` gives ``out/<map id>_r_symbols.shp``, ...,
+``out/<map id>_apygis_map.dbf``; ``write(m, "out/NAME.shp")`` uses the prefix
+``NAME`` instead of the map ID. Reading ``out/NAME.shp`` (when no such file
+exists) or the directory ``out/`` reads the whole set; reading one existing
+file reads that OGR layer alone.
+
+Files apygis did not write are imported too: points become symbols (or
+texts, when the layer has a ``text`` field), lines and polygon rings become
+line points whose references are rebuilt by
+:func:`apygis.model.build.add_lines`. Writes go through pyogrio's vectorised
+numpy path (whole columns of WKB and attributes), into a temporary file or
+directory beside the target that is then renamed over it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import re
+import shutil
+import string
+import struct
+import tempfile
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from apygis.errors import DriverError, FormatError
+from apygis.formats import Driver
+from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
+from apygis.model.records import (
+    LINE_DTYPE,
+    MAX_CODE,
+    NO_REF,
+    REF_FIELDS,
+    SYMBOL_DTYPE,
+    TEXT_DTYPE,
+)
+
+__all__ = [
+    "FGB",
+    "GEOJSON",
+    "GPKG",
+    "KINDS",
+    "MAP_TABLE",
+    "SCHEMA_VERSION",
+    "SHP",
+    "outputs",
+    "read",
+    "write",
+]
+
+log = logging.getLogger(__name__)
+
+SCHEMA_VERSION = 1
+"""Version of the schema in ``docs/formats/ogr.md`` (the ``apygis`` field of ``apygis_map``)."""
+
+MAP_TABLE = "apygis_map"
+"""Name of the header table (prefixed ``<prefix>_`` in the single-layer formats)."""
+
+KINDS = ("symbols", "lines", "areas", "texts", "line_points")
+"""OGR layer kinds per map layer, in the order they are written."""
+
+_EXACT = ("symbols", "texts", "line_points")
+_NAME_RE = re.compile(
+    r"^(?:(?P<prefix>.+)_)?(?P<ext>[a-z]{1,3})_(?P<kind>symbols|lines|areas|texts|line_points)$"
+)
+_MAP_RE = re.compile(r"^(?:(?P<prefix>.+)_)?apygis_map$")
+_ID_BAD = re.compile(r"[^A-Za-z0-9_-]")
+
+# ISO WKB geometry type codes (Z variants)
+_WKB_POINT_Z, _WKB_LINESTRING_Z, _WKB_POLYGON_Z = 1001, 1002, 1003
+_POINT_WKB = np.dtype([("order", "u1"), ("type", "<u4"), ("xyz", "<f8", 3)])  # 29 bytes
+_POINT_HEADERS = (b"\x01\xe9\x03\x00\x00", b"\x01\x01\x00\x00\x80")  # ISO, EWKB Point Z
+
+_DBF_BYTES = 254  # longest string a DBF field holds
+_SHP_CHUNK = 60  # characters per header row in a Shapefile (<= 240 bytes of UTF-8)
+_SHP_SIDECARS = ("shp", "shx", "dbf", "prj", "cpg", "qix", "sbn", "sbx")
+
+
+# --------------------------------------------------------------------------- formats
+
+
+@dataclass(frozen=True)
+class _Format:
+    """What differs between the four OGR formats."""
+
+    name: str
+    ogr: str
+    extensions: tuple[str, ...]
+    multi: bool  # one file holds every OGR layer (GeoPackage)
+    layer_options: dict = field(default_factory=dict)
+    containers: tuple[str, ...] = ()  # multi-layer files this driver also reads (zip)
+
+    @property
+    def ext(self) -> str:
+        return self.extensions[0]
+
+
+_GPKG = _Format("gpkg", "GPKG", ("gpkg",), multi=True)
+_SHP = _Format("shp", "ESRI Shapefile", ("shp",), multi=False, containers=("shz", "zip"))
+# 17 significant digits: every float64 comes back bit for bit (GDAL writes 15 decimals)
+_GEOJSON = _Format(
+    "geojson",
+    "GeoJSON",
+    ("geojson", "json"),
+    multi=False,
+    layer_options={"SIGNIFICANT_FIGURES": "17"},
+)
+# no spatial index: it would reorder the features (and refuses NULL geometries)
+_FGB = _Format("fgb", "FlatGeobuf", ("fgb",), multi=False, layer_options={"SPATIAL_INDEX": "NO"})
+_FORMATS = {f.name: f for f in (_GPKG, _SHP, _GEOJSON, _FGB)}
+
+
+def _fmt(name) -> _Format:
+    if isinstance(name, _Format):
+        return name
+    try:
+        return _FORMATS[str(name).lower()]
+    except KeyError:
+        raise DriverError(f"no OGR format named {name!r}; known: {', '.join(_FORMATS)}") from None
+
+
+# --------------------------------------------------------------------------- pyogrio guards
+
+
+@contextlib.contextmanager
+def _quiet():
+    """Turn pyogrio's and GDAL's warnings into log records (the library never warns on stdout)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    for w in caught:
+        log.debug("pyogrio: %s", w.message)
+
+
+def _gdal(call: Callable, what: str, path, layer: str | None = None, error=FormatError):
+    """Run a pyogrio call; every exception it raises becomes ``error`` (a FormatError)."""
+    try:
+        with _quiet():
+            return call()
+    except FormatError:
+        raise
+    except MemoryError:
+        raise error(f"{what}: out of memory", path=path, record=_rec(layer)) from None
+    except Exception as exc:  # pyogrio.errors.*, RuntimeError, ValueError, OSError, ...
+        msg = str(exc).strip() or type(exc).__name__
+        raise error(f"{what}: {msg}", path=path, record=_rec(layer)) from None
+
+
+class _WriteError(FormatError):
+    """Internal: GDAL failed while writing (re-raised as DriverError by :func:`write`)."""
+
+
+def _rec(layer: str | None) -> str | None:
+    return None if layer is None else f"layer {layer}"
+
+
+# --------------------------------------------------------------------------- WKB
+
+
+def _points_wkb(xyz: np.ndarray) -> np.ndarray:
+    """ISO WKB Point Z of every row of ``xyz`` (n, 3), as an object array of bytes."""
+    rec = np.empty(len(xyz), _POINT_WKB)
+    rec["order"] = 1
+    rec["type"] = _WKB_POINT_Z
+    rec["xyz"] = xyz
+    out = np.empty(len(xyz), dtype=object)
+    if len(xyz):
+        out[:] = np.frombuffer(rec.tobytes(), f"V{_POINT_WKB.itemsize}").tolist()
+    return out
+
+
+def _lines_wkb(coords: np.ndarray, offsets: np.ndarray, closed: bool) -> np.ndarray:
+    """ISO WKB LineString Z (or Polygon Z of one ring, repeating the first vertex)."""
+    out = np.empty(len(offsets) - 1, dtype=object)
+    head_line = struct.Struct("<BII")
+    head_poly = struct.Struct("<BIII")
+    for k in range(len(out)):
+        a, b = int(offsets[k]), int(offsets[k + 1])
+        pts = coords[a:b]
+        if closed:
+            out[k] = (
+                head_poly.pack(1, _WKB_POLYGON_Z, 1, b - a + 1) + pts.tobytes() + pts[0].tobytes()
+            )
+        else:
+            out[k] = head_line.pack(1, _WKB_LINESTRING_Z, b - a) + pts.tobytes()
+    return out
+
+
+def _point_coords(wkb: np.ndarray, path, layer: str) -> np.ndarray:
+    """(n, 3) coordinates of a column of WKB points; Z missing -> 0. Raises FormatError.
+
+    Fast path: every value is a 29-byte little-endian Point Z (ISO or EWKB
+    type code), decoded as one structured array; anything else goes through
+    shapely.
+    """
+    n = len(wkb)
+    if n == 0:
+        return np.zeros((0, 3))
+    try:
+        lengths = np.fromiter(map(len, wkb), dtype=np.int64, count=n)
+        blob = b"".join(wkb)
+    except TypeError:  # a NULL geometry
+        lengths, blob = None, b""
+    if lengths is not None and (lengths == _POINT_WKB.itemsize).all():
+        heads = np.frombuffer(blob, "u1").reshape(n, _POINT_WKB.itemsize)[:, :5]
+        for h in _POINT_HEADERS:
+            if (heads == np.frombuffer(h, "u1")).all():
+                xyz = np.frombuffer(blob, _POINT_WKB)["xyz"].astype(np.float64)
+                _check_finite(xyz, path, layer)
+                return xyz
+    return _point_coords_slow(wkb, path, layer)
+
+
+def _point_coords_slow(wkb: np.ndarray, path, layer: str) -> np.ndarray:
+    import shapely
+
+    geoms = _from_wkb(wkb, path, layer)
+    for k, g in enumerate(geoms):
+        if g is None:
+            raise FormatError(
+                f"feature {k + 1} has no geometry; expected a point", path, _rec(layer)
+            )
+    bad = (shapely.get_type_id(geoms) != 0) | shapely.is_empty(geoms)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise FormatError(
+            f"feature {k + 1} is {'an empty' if geoms[k].is_empty else 'a'} {geoms[k].geom_type}; "
+            "expected a point",
+            path,
+            _rec(layer),
+        )
+    xyz = shapely.get_coordinates(geoms, include_z=True)
+    xyz[:, 2] = np.where(np.isnan(xyz[:, 2]), 0.0, xyz[:, 2])
+    _check_finite(xyz, path, layer)
+    return xyz
+
+
+def _from_wkb(wkb: np.ndarray, path, layer: str) -> np.ndarray:
+    import shapely
+
+    try:
+        with _quiet():
+            return shapely.from_wkb(wkb, on_invalid="raise")
+    except Exception as exc:  # shapely.errors.GEOSException, TypeError
+        raise FormatError(f"unreadable geometry: {exc}", path, _rec(layer)) from None
+
+
+def _check_finite(xyz: np.ndarray, path, layer: str) -> None:
+    bad = ~np.isfinite(xyz).all(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise FormatError(f"feature {k + 1}: coordinates are not finite", path, _rec(layer))
+
+
+# --------------------------------------------------------------------------- writing
+
+
+@dataclass
+class _Table:
+    """One OGR layer to write: whole columns."""
+
+    name: str
+    geometry_type: str | None
+    wkb: np.ndarray | None
+    fields: list[str]
+    data: list[np.ndarray]
+    masks: list[np.ndarray | None]
+
+
+def _symbol_names() -> np.ndarray:
+    from apygis.model.symbols import default_library
+
+    lib = default_library()
+    return np.array([lib.name(c) for c in range(MAX_CODE + 1)], dtype=object)
+
+
+def _xyz(table: np.ndarray) -> np.ndarray:
+    return np.column_stack([table["x"], table["y"], table["z"]]) if len(table) else np.zeros((0, 3))
+
+
+def _points_text(nums: np.ndarray, offsets: np.ndarray, limit: int | None) -> np.ndarray:
+    """The point numbers of each line as ``"1,2,3"`` (cut to ``limit`` bytes with ``,...``)."""
+    out = np.empty(len(offsets) - 1, dtype=object)
+    all_nums = nums.tolist()
+    for k in range(len(out)):
+        s = ",".join(map(str, all_nums[offsets[k] : offsets[k + 1]]))
+        if limit is not None and len(s) > limit:
+            s = s[: limit - 4].rsplit(",", 1)[0] + ",..."
+        out[k] = s
+    return out
+
+
+def _header_rows(map_: MapFile, fmt: _Format, crs: str | None) -> _Table:
+    values = {
+        "crs": crs,
+        "notes": map_.notes,
+        "layers": ",".join(map_.layers),
+    }
+    if fmt is _SHP:
+        chunks = {k: _chunks(v or "") for k, v in values.items()}
+        rows = max(1, *(len(c) for c in chunks.values()))
+    else:
+        chunks = {k: [v] if v else [] for k, v in values.items()}
+        rows = 1
+    n = rows
+
+    def column(key):
+        col = np.array([None] * n, dtype=object)
+        for i, c in enumerate(chunks[key]):
+            col[i] = c
+        if key == "notes" and col[0] is None:
+            col[0] = ""
+        return col
+
+    def first(value, dtype):
+        arr = np.zeros(n, dtype=dtype)
+        mask = np.ones(n, dtype=bool)
+        if value is not None:
+            arr[0] = value
+            mask[0] = False
+        return arr, mask
+
+    version, vmask = first(SCHEMA_VERSION, np.int32)
+    scale, smask = first(map_.scale, np.int64)
+    ids = np.array([map_.id] + [None] * (n - 1), dtype=object)
+    return _Table(
+        name=MAP_TABLE,
+        geometry_type=None,
+        wkb=None,
+        fields=["apygis", "id", "scale", "crs", "notes", "layers"],
+        data=[version, ids, scale, column("crs"), column("notes"), column("layers")],
+        masks=[vmask, None, smask, None, None, None],
+    )
+
+
+def _chunks(text: str) -> list[str]:
+    """``text`` in pieces of about 60 characters, cut between two non-blank characters.
+
+    A DBF field loses leading and trailing blanks, so no piece may start or
+    end with one (only blanks at the very start or end of ``text`` are lost).
+    """
+    out = []
+    i = 0
+    n = len(text)
+    while i < n:
+        j = min(i + _SHP_CHUNK, n)
+        while j < n and (text[j - 1] == " " or text[j] == " "):
+            j += 1
+        out.append(text[i:j])
+        i = j
+    return out
+
+
+def _tables(map_: MapFile, fmt: _Format, crs: str | None) -> list[_Table]:
+    """Every OGR layer of the schema for ``map_`` (non-empty ones only), header first."""
+    from apygis.model.build import export_lines
+
+    out = [_header_rows(map_, fmt, crs)]
+    names = None
+    limit = _DBF_BYTES if fmt is _SHP else None
+    for lay in map_:
+        ext = lay.ext
+        sym = lay.symbols
+        if len(sym):
+            if names is None:
+                names = _symbol_names()
+            code = sym["code"].astype(np.int32)
+            out.append(
+                _Table(
+                    f"{ext}_symbols",
+                    "Point Z",
+                    _points_wkb(_xyz(sym)),
+                    ["num", "code", "name"],
+                    [sym["num"].astype(np.int64), code, names[np.clip(code, 0, MAX_CODE)]],
+                    [None, None, None],
+                )
+            )
+        lp = lay.line_points
+        if len(lp):
+            ls = export_lines(lay)
+            lengths = np.diff(ls.offsets)
+            for kind, gtype, sel in (
+                ("lines", "LineString Z", ~ls.closed & (lengths >= 2)),
+                ("areas", "Polygon Z", ls.closed),
+            ):
+                if not sel.any():
+                    continue
+                idx = np.flatnonzero(sel)
+                starts, stops = ls.offsets[idx], ls.offsets[idx + 1]
+                sub_len = stops - starts
+                sub_off = np.r_[0, np.cumsum(sub_len)].astype(np.int64)
+                take = np.repeat(starts - sub_off[:-1], sub_len) + np.arange(sub_off[-1])
+                coords = np.ascontiguousarray(ls.coords[take], dtype="<f8")
+                nums = ls.nums[take]
+                out.append(
+                    _Table(
+                        f"{ext}_{kind}",
+                        gtype,
+                        _lines_wkb(coords, sub_off, closed=kind == "areas"),
+                        ["code", "npoints", "points"],
+                        [
+                            ls.codes[idx].astype(np.int32),
+                            sub_len.astype(np.int32),
+                            _points_text(nums, sub_off, limit),
+                        ],
+                        [None, None, None],
+                    )
+                )
+        tx = lay.texts
+        if len(tx):
+            out.append(
+                _Table(
+                    f"{ext}_texts",
+                    "Point Z",
+                    _points_wkb(_xyz(tx)),
+                    ["num", "text"],
+                    [tx["num"].astype(np.int64), tx["text"].astype(object)],
+                    [None, None],
+                )
+            )
+        if len(lp):
+            out.append(
+                _Table(
+                    f"{ext}_line_points",
+                    "Point Z",
+                    _points_wkb(_xyz(lp)),
+                    ["num", "code", *REF_FIELDS],
+                    [lp["num"].astype(np.int64), lp["code"].astype(np.int32)]
+                    + [lp[r].astype(np.int64) for r in REF_FIELDS],
+                    [None] * 6,
+                )
+            )
+    return out
+
+
+def _write_table(path: Path, fmt: _Format, table: _Table, crs: str | None) -> None:
+    import pyogrio.raw
+
+    masks = table.masks if any(m is not None for m in table.masks) else None
+    _gdal(
+        lambda: pyogrio.raw.write(
+            str(path),
+            table.wkb,
+            table.data,
+            table.fields,
+            field_mask=masks,
+            layer=table.name if fmt.multi else path.stem,
+            driver=fmt.ogr,
+            geometry_type=table.geometry_type,
+            crs=crs if table.geometry_type is not None else None,
+            layer_options=fmt.layer_options or None,
+        ),
+        "cannot write",
+        path,
+        table.name,
+        error=_WriteError,
+    )
+
+
+def _split_target(map_: MapFile, path, fmt: _Format) -> tuple[Path, str, str]:
+    """For the single-layer formats: ``(directory, prefix, file extension)``."""
+    p = Path(path)
+    suffix = p.suffix[1:].lower()
+    if suffix in fmt.extensions and not p.is_dir():
+        return p.parent, p.stem, suffix
+    return p, map_.id, fmt.ext
+
+
+def _file_names(table: _Table, fmt: _Format, prefix: str, ext: str, crs) -> list[str]:
+    base = f"{prefix}_{table.name}"
+    if fmt is not _SHP:
+        return [f"{base}.{ext}"]
+    if table.geometry_type is None:
+        return [f"{base}.dbf", f"{base}.cpg"]
+    names = [f"{base}.shp", f"{base}.shx", f"{base}.dbf", f"{base}.cpg"]
+    if crs is not None:
+        names.append(f"{base}.prj")
+    return names
+
+
+def outputs(map_: MapFile, path, fmt="gpkg") -> list[Path]:
+    """Every file a write of ``map_`` to ``path`` in format ``fmt`` creates (or replaces)."""
+    fmt = _fmt(fmt)
+    if fmt.multi:
+        return [Path(path)]
+    directory, prefix, ext = _split_target(map_, path, fmt)
+    crs = crs_string(map_.crs)
+    return [
+        directory / name
+        for table in _tables_skeleton(map_)
+        for name in _file_names(table, fmt, prefix, ext, crs)
+    ]
+
+
+def _tables_skeleton(map_: MapFile) -> list[_Table]:
+    """The OGR layers a write produces, names and geometry types only (no data built)."""
+    from apygis.model.build import export_lines
+
+    out = [_Table(MAP_TABLE, None, None, [], [], [])]
+    for lay in map_:
+        if len(lay.symbols):
+            out.append(_Table(f"{lay.ext}_symbols", "Point Z", None, [], [], []))
+        if len(lay.line_points):
+            ls = export_lines(lay)  # a branch end gains its junction: a 1-point branch is a line
+            if (~ls.closed & (np.diff(ls.offsets) >= 2)).any():
+                out.append(_Table(f"{lay.ext}_lines", "LineString Z", None, [], [], []))
+            if ls.closed.any():
+                out.append(_Table(f"{lay.ext}_areas", "Polygon Z", None, [], [], []))
+        if len(lay.texts):
+            out.append(_Table(f"{lay.ext}_texts", "Point Z", None, [], [], []))
+        if len(lay.line_points):
+            out.append(_Table(f"{lay.ext}_line_points", "Point Z", None, [], [], []))
+    return out
+
+
+def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = True) -> list[Path]:
+    """Write ``map_`` in an OGR format, atomically; returns the files written.
+
+    Parameters
+    ----------
+    map_ : MapFile
+        The map.
+    path : str or os.PathLike
+        GeoPackage: the file. Shapefile, GeoJSON, FlatGeobuf: a directory (the
+        files are named ``<map id>_<layer>``) or ``dir/NAME.<ext>`` (named
+        ``NAME_<layer>``).
+    fmt : str
+        ``"gpkg"``, ``"shp"``, ``"geojson"`` or ``"fgb"``.
+    progress : callable, optional
+        ``progress(done, total)`` after each OGR layer.
+    spatial_index : bool
+        GeoPackage only: give every spatial layer an R-tree index (GDAL's
+        default). Without, a map of many layers is written about a third
+        faster; GIS programs draw small layers as fast either way.
+
+    Returns
+    -------
+    list of Path
+    """
+    fmt = _fmt(fmt)
+    if fmt.multi and not spatial_index:
+        fmt = replace(fmt, layer_options={**fmt.layer_options, "SPATIAL_INDEX": "NO"})
+    crs = crs_string(map_.crs)
+    if fmt.multi:
+        target = Path(path)
+        if target.is_dir():
+            raise DriverError(f"{target}: is a directory; a {fmt.ogr} target is a file")
+        directory = target.parent
+    else:
+        directory, prefix, ext = _split_target(map_, path, fmt)
+        if directory.exists() and not directory.is_dir():
+            raise DriverError(f"{directory}: is a file; {fmt.ogr} writes into a directory")
+    tables = _tables(map_, fmt, crs)
+    names = {} if fmt.multi else {t.name: _file_names(t, fmt, prefix, ext, crs) for t in tables}
+    directory.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".apygis-", suffix=".tmp", dir=directory))
+    try:
+        with _sqlite_unsynced(fmt):
+            _write_tables(
+                tmp, fmt, tables, names, target.name if fmt.multi else None, crs, progress
+            )
+        if fmt.multi:
+            _fsync(tmp / target.name)
+            os.replace(tmp / target.name, target)
+            return [target]
+        made = sorted(p.name for p in tmp.iterdir())
+        expected = sorted(n for ns in names.values() for n in ns)
+        if made != expected:  # pragma: no cover - a GDAL that writes other side files
+            log.warning("%s: GDAL wrote %s, expected %s", directory, made, expected)
+        for name in made:
+            _fsync(tmp / name)
+        written = []
+        for name in made:
+            os.replace(tmp / name, directory / name)
+            written.append(directory / name)
+        _remove_stale(directory, prefix, fmt, set(made))
+        return written
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _write_tables(tmp: Path, fmt: _Format, tables, names, single: str | None, crs, progress):
+    for k, table in enumerate(tables):
+        dest = tmp / (single if single is not None else names[table.name][0])
+        try:
+            _write_table(dest, fmt, table, crs)
+        except _WriteError as exc:
+            raise DriverError(str(exc)) from None
+        if progress:
+            progress(k + 1, len(tables))
+
+
+@contextlib.contextmanager
+def _sqlite_unsynced(fmt: _Format):
+    """SQLite without a disk sync per transaction while a GeoPackage is written.
+
+    The file is a temporary one, synced once when complete and only then
+    renamed over the target, so the per-transaction syncs buy nothing (they
+    take most of the time of a GeoPackage of many layers). GDAL's
+    configuration is process-wide: the previous value is restored after.
+    """
+    if not fmt.multi:
+        yield
+        return
+    import pyogrio
+
+    key = "OGR_SQLITE_SYNCHRONOUS"
+    before = pyogrio.get_gdal_config_option(key)
+    pyogrio.set_gdal_config_options({key: "OFF"})
+    try:
+        yield
+    finally:
+        pyogrio.set_gdal_config_options({key: before})
+
+
+def _fsync(p: Path) -> None:
+    with open(p, "rb") as fh:
+        os.fsync(fh.fileno())
+
+
+def _remove_stale(directory: Path, prefix: str, fmt: _Format, written: set[str]) -> None:
+    """Remove files of this prefix's schema that the write did not produce.
+
+    They would be read back as part of the map: an OGR layer the map no
+    longer has, a ``.prj`` left from a map that had a CRS, a stale spatial
+    index. Only names of the schema with this prefix are touched.
+    """
+    kinds = _SHP_SIDECARS if fmt is _SHP else fmt.extensions
+    for p in sorted(directory.iterdir()):
+        stem, _, suffix = p.name.rpartition(".")
+        if not stem or suffix.lower() not in kinds or p.name in written or not p.is_file():
+            continue
+        parsed = _parse_name(stem)
+        if parsed is not None and parsed[0] == prefix:
+            log.info("removing %s: not part of the map just written", p)
+            p.unlink()
+
+
+# --------------------------------------------------------------------------- reading: sources
+
+
+@dataclass(frozen=True)
+class _Source:
+    """One OGR layer to read: the dataset GDAL opens, the layer in it, the name we match."""
+
+    dataset: str
+    layer: str | None
+    name: str
+    spatial: bool = True
+
+
+def _parse_name(name: str) -> tuple[str | None, str, str] | None:
+    """``(prefix, ext, kind)`` of a name of the schema (``kind`` ``"map"``: the header)."""
+    m = _MAP_RE.match(name)
+    if m:
+        return m["prefix"], "", "map"
+    m = _NAME_RE.match(name)
+    if m:
+        return m["prefix"], m["ext"], m["kind"]
+    return None
+
+
+def _dataset_layers(path: Path, fmt: _Format) -> list[_Source]:
+    import pyogrio
+
+    rows = _gdal(lambda: pyogrio.list_layers(str(path)), "not a readable GIS file", path)
+    try:
+        layers = [(str(r[0]), r[1] is not None) for r in rows]
+    except (TypeError, IndexError):
+        raise FormatError("GDAL listed no layers", path=path) from None
+    if not layers:
+        raise FormatError(f"no layers: nothing to read as {fmt.ogr}", path=path)
+    if fmt.multi or path.suffix[1:].lower() in fmt.containers:
+        return [_Source(str(path), n, n, spatial) for n, spatial in layers]
+    name, spatial = layers[0]
+    return [_Source(str(path), name, path.stem, spatial)]
+
+
+def _member_files(directory: Path, fmt: _Format, prefix: str | None) -> list[Path]:
+    exts = set(fmt.extensions)
+    files = []
+    for p in sorted(directory.iterdir()):
+        stem, _, suffix = p.name.rpartition(".")
+        if not stem or not p.is_file():
+            continue
+        suffix = suffix.lower()
+        parsed = _parse_name(stem)
+        member = suffix in exts or (
+            fmt is _SHP and suffix == "dbf" and parsed is not None and parsed[2] == "map"
+        )
+        if member and (prefix is None or (parsed is not None and parsed[0] == prefix)):
+            files.append(p)
+    return files
+
+
+def _sources(path, fmt: _Format) -> tuple[list[_Source], str]:
+    """The OGR layers to read for ``path`` and a default map ID."""
+    p = Path(path)
+    if p.is_file():
+        return _dataset_layers(p, fmt), p.stem.split(".")[0]
+    if fmt.multi:
+        what = "is a directory, not a file" if p.is_dir() else "no such file"
+        raise FormatError(what, path=p)
+    if p.is_dir():
+        files = _member_files(p, fmt, None)
+        prefixes = {parsed[0] for f in files if (parsed := _parse_name(f.stem))}
+        if len(prefixes) > 1:
+            names = ", ".join(sorted(str(x) for x in prefixes))
+            raise FormatError(
+                f"holds the files of several maps ({names}); read one of them as "
+                f"{p / ('NAME.' + fmt.ext)}",
+                path=p,
+            )
+        default_id = next(iter(prefixes)) if prefixes and None not in prefixes else p.name
+        if not files:
+            raise FormatError(f"no {fmt.ogr} files ({'/'.join(fmt.extensions)}) here", path=p)
+    else:
+        named_set = p.suffix[1:].lower() in fmt.extensions and p.parent.is_dir()
+        files = _member_files(p.parent, fmt, p.stem) if named_set else []
+        if not files:
+            raise FormatError(f"no such file, nor files {p.stem}_*.{fmt.ext} of a map", path=p)
+        default_id = p.stem
+    out = []
+    for f in files:
+        out += _dataset_layers(f, fmt)
+    return out, default_id
+
+
+# --------------------------------------------------------------------------- reading: columns
+
+
+def _read_layer(src: _Source):
+    """``(meta, wkb or None, {field: array})`` of one OGR layer."""
+    import pyogrio.raw
+
+    def call():
+        return pyogrio.raw.read(src.dataset, layer=src.layer)
+
+    result = _gdal(call, "cannot read", src.dataset, src.name)
+    try:
+        meta, _, wkb, data = result
+        fields = [str(f) for f in meta["fields"]]
+        columns = dict(zip(fields, data, strict=True))
+    except (TypeError, ValueError, KeyError) as exc:
+        raise FormatError(
+            f"unexpected layer structure ({exc})", src.dataset, _rec(src.name)
+        ) from None
+    if wkb is not None and len(columns) and any(len(c) != len(wkb) for c in columns.values()):
+        raise FormatError("columns of unequal length", src.dataset, _rec(src.name))
+    return meta, wkb, columns
+
+
+def _field(columns: dict, name: str | None):
+    if name is None:
+        return None
+    if name in columns:
+        return columns[name]
+    low = name.lower()
+    for k, v in columns.items():
+        if k.lower() == low:
+            return v
+    return None
+
+
+def _int_column(values, name: str, src: _Source, nullable: bool = False) -> np.ndarray:
+    """An integer column; NULL is -1 where ``nullable``, else an error."""
+    a = np.asarray(values)
+    if a.dtype.kind in "iu":
+        if a.dtype.kind == "u" and len(a) and a.max() > np.iinfo(np.int64).max:
+            raise FormatError(f"field {name}: value out of range", src.dataset, _rec(src.name))
+        return a.astype(np.int64)
+    if a.dtype.kind == "f":
+        null = np.isnan(a)
+        with np.errstate(invalid="ignore"):
+            bad = ~null & (~np.isfinite(a) | (a != np.round(a)) | (np.abs(a) > 2.0**62))
+        if null.any() and not nullable:
+            bad |= null
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise FormatError(
+                f"feature {k + 1}: field {name} is {a[k]!r}, expected an integer",
+                src.dataset,
+                _rec(src.name),
+            )
+        return np.where(null, NO_REF, np.nan_to_num(a)).astype(np.int64)
+    if a.dtype.kind == "O":
+        out = np.empty(len(a), dtype=np.int64)
+        for k, v in enumerate(a):
+            iv = _as_int(v)
+            if iv is None and nullable and v is None:
+                iv = NO_REF
+            if iv is None:
+                raise FormatError(
+                    f"feature {k + 1}: field {name} is {v!r}, expected an integer",
+                    src.dataset,
+                    _rec(src.name),
+                )
+            out[k] = iv
+        return out
+    raise FormatError(f"field {name} is not an integer field", src.dataset, _rec(src.name))
+
+
+def _as_int(v) -> int | None:
+    if isinstance(v, (bool, np.bool_)):
+        return None
+    if isinstance(v, (int, np.integer)):
+        return int(v) if abs(int(v)) <= 2**62 else None
+    if isinstance(v, (float, np.floating)) and np.isfinite(v) and float(v).is_integer():
+        return int(v) if abs(v) <= 2.0**62 else None
+    if isinstance(v, str):
+        try:
+            return _as_int(int(v.strip()))
+        except ValueError:
+            return None
+    return None
+
+
+def _codes(values, name: str, src: _Source, default: int | None = None) -> np.ndarray:
+    codes = _int_column(values, name, src, nullable=default is not None)
+    if default is not None:
+        codes = np.where(_null_mask(values), default, codes)
+    bad = (codes < 0) | (codes > MAX_CODE)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise FormatError(
+            f"feature {k + 1}: {name} {codes[k]} is outside 0-{MAX_CODE}",
+            src.dataset,
+            _rec(src.name),
+        )
+    return codes.astype(np.int16)
+
+
+def _null_mask(values) -> np.ndarray:
+    a = np.asarray(values)
+    if a.dtype.kind == "f":
+        return np.isnan(a)
+    if a.dtype.kind == "O":
+        return np.array([v is None for v in a], dtype=bool)
+    return np.zeros(len(a), dtype=bool)
+
+
+def _texts(values, name: str, src: _Source) -> np.ndarray:
+    out = np.empty(len(values), dtype=TEXT_DTYPE["text"])
+    for k, v in enumerate(values):
+        if v is None:
+            v = ""
+        elif not isinstance(v, str):
+            if isinstance(v, (bytes, bytearray)):
+                raise FormatError(
+                    f"feature {k + 1}: field {name} is binary, expected a text",
+                    src.dataset,
+                    _rec(src.name),
+                )
+            v = str(v)
+        try:
+            out[k] = check_text(v)
+        except ValueError as exc:
+            raise FormatError(f"feature {k + 1}: {exc}", src.dataset, _rec(src.name)) from None
+    return out
+
+
+def _require(columns: dict, names, src: _Source) -> list:
+    out = []
+    for n in names:
+        col = _field(columns, n)
+        if col is None:
+            raise FormatError(
+                f"field {n} is missing (a layer named like {src.name} follows the apygis schema, "
+                "docs/formats/ogr.md)",
+                src.dataset,
+                _rec(src.name),
+            )
+        out.append(col)
+    return out
+
+
+def _exact_table(kind: str, wkb, columns: dict, src: _Source) -> np.ndarray:
+    """An apygis table (symbols, texts, line_points) from its OGR layer, record for record."""
+    if wkb is None:
+        raise FormatError("the layer has no geometry", src.dataset, _rec(src.name))
+    xyz = _point_coords(wkb, src.dataset, src.name)
+    if kind == "symbols":
+        num, code = _require(columns, ("num", "code"), src)
+        t = np.zeros(len(xyz), SYMBOL_DTYPE)
+        t["code"] = _codes(code, "code", src)
+    elif kind == "texts":
+        num, text = _require(columns, ("num", "text"), src)
+        t = np.zeros(len(xyz), TEXT_DTYPE)
+        t["text"] = _texts(text, "text", src)
+    else:
+        num, code, *refs = _require(columns, ("num", "code", *REF_FIELDS), src)
+        t = np.zeros(len(xyz), LINE_DTYPE)
+        t["code"] = _codes(code, "code", src)
+        for r, col in zip(REF_FIELDS, refs, strict=True):
+            t[r] = _int_column(col, r, src, nullable=True)
+    t["num"] = _int_column(num, "num", src)
+    t["x"], t["y"], t["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    return t
+
+
+# --------------------------------------------------------------------------- reading: foreign
+
+
+@dataclass
+class _Foreign:
+    """What foreign OGR layers add to one map layer."""
+
+    symbols: list = field(default_factory=list)  # (xyz, codes)
+    texts: list = field(default_factory=list)  # (xyz, texts)
+    lines: list = field(default_factory=list)  # arrays (n, 3)
+    line_codes: list = field(default_factory=list)
+    line_closed: list = field(default_factory=list)
+
+
+def _explode(geoms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Single-part geometries and the feature index of each (multi-parts and collections split)."""
+    import shapely
+
+    ok = np.array([g is not None for g in geoms], dtype=bool)
+    idx = np.flatnonzero(ok)
+    parts = geoms[ok]
+    if len(parts):
+        parts = parts[~shapely.is_empty(parts)]
+        idx = idx[~shapely.is_empty(geoms[ok])]
+    for _ in range(8):
+        tid = shapely.get_type_id(parts) if len(parts) else np.zeros(0, int)
+        multi = tid >= 4
+        if not multi.any():
+            break
+        sub, sub_idx = shapely.get_parts(parts[multi], return_index=True)
+        parts = np.r_[parts[~multi], sub]
+        idx = np.r_[idx[~multi], idx[multi][sub_idx]]
+        keep = ~shapely.is_empty(parts)
+        parts, idx = parts[keep], idx[keep]
+    order = np.argsort(idx, kind="stable")
+    return parts[order], idx[order]
+
+
+def _foreign_layer(wkb, columns: dict, src: _Source, acc: _Foreign, opts: dict) -> None:
+    import shapely
+
+    if wkb is None:
+        log.info("%s: layer %s has no geometry; skipped", src.dataset, src.name)
+        return
+    geoms = _from_wkb(wkb, src.dataset, src.name)
+    parts, feat = _explode(np.asarray(geoms, dtype=object))
+    if len(parts) == 0:
+        return
+    tid = shapely.get_type_id(parts)
+    code_col = _field(columns, opts["code_field"])
+    if code_col is not None:
+        codes = _codes(code_col, opts["code_field"], src, default=opts["default_code"])
+    else:
+        codes = np.full(len(geoms), opts["default_code"], dtype=np.int16)
+    text_col = _field(columns, opts["text_field"])
+    kinds_known = np.isin(tid, (0, 1, 2, 3))
+    if not kinds_known.all():
+        k = int(feat[np.flatnonzero(~kinds_known)[0]])
+        raise FormatError(
+            f"feature {k + 1}: unsupported geometry type", src.dataset, _rec(src.name)
+        )
+
+    pts = tid == 0
+    if pts.any():
+        xyz = _coords3(shapely.get_coordinates(parts[pts], include_z=True), src)
+        if text_col is not None:
+            acc.texts.append(
+                (
+                    xyz,
+                    _texts(np.asarray(text_col, dtype=object)[feat[pts]], opts["text_field"], src),
+                )
+            )
+        else:
+            acc.symbols.append((xyz, codes[feat[pts]]))
+
+    lines = (tid == 1) | (tid == 2)
+    polys = tid == 3
+    geoms_l = parts[lines]
+    feat_l = feat[lines]
+    closed_l = np.zeros(len(geoms_l), dtype=bool)
+    if polys.any():
+        rings, ridx = shapely.get_rings(parts[polys], return_index=True)
+        keep = ~shapely.is_empty(rings)
+        geoms_l = np.r_[geoms_l, rings[keep]]
+        feat_l = np.r_[feat_l, feat[polys][ridx[keep]]]
+        closed_l = np.r_[closed_l, np.ones(int(keep.sum()), dtype=bool)]
+        order = np.argsort(feat_l, kind="stable")
+        geoms_l, feat_l, closed_l = geoms_l[order], feat_l[order], closed_l[order]
+    if len(geoms_l):
+        coords, which = shapely.get_coordinates(geoms_l, include_z=True, return_index=True)
+        coords = _coords3(coords, src)
+        bounds = np.r_[0, np.cumsum(np.bincount(which, minlength=len(geoms_l)))]
+        for k in range(len(geoms_l)):
+            acc.lines.append(coords[bounds[k] : bounds[k + 1]])
+        acc.line_codes += codes[feat_l].tolist()
+        acc.line_closed += closed_l.tolist()
+
+
+def _coords3(xyz: np.ndarray, src: _Source) -> np.ndarray:
+    xyz = np.array(xyz, dtype=float).reshape(-1, 3)
+    xyz[:, 2] = np.where(np.isnan(xyz[:, 2]), 0.0, xyz[:, 2])
+    _check_finite(xyz, src.dataset, src.name)
+    return xyz
+
+
+# --------------------------------------------------------------------------- reading: header
+
+
+def _header(columns: dict, src: _Source) -> dict:
+    """The map header from the ``apygis_map`` table."""
+    ids = _field(columns, "id")
+    if ids is None or len(ids) == 0:
+        raise FormatError("the map table has no id", src.dataset, _rec(src.name))
+    version = _field(columns, "apygis")
+    if version is not None:
+        v = _int_column(np.asarray(version)[:1], "apygis", src, nullable=True)[0]
+        if v > SCHEMA_VERSION:
+            raise FormatError(
+                f"written in apygis OGR schema version {v}; this apygis reads version "
+                f"{SCHEMA_VERSION}",
+                src.dataset,
+                _rec(src.name),
+            )
+    map_id = ids[0]
+    if not isinstance(map_id, str):
+        raise FormatError(f"map id {map_id!r} is not a text", src.dataset, _rec(src.name))
+    scale = None
+    scol = _field(columns, "scale")
+    if scol is not None:
+        s = _int_column(np.asarray(scol)[:1], "scale", src, nullable=True)[0]
+        scale = None if _null_mask(np.asarray(scol)[:1])[0] else int(s)
+
+    def text(name):
+        col = _field(columns, name)
+        if col is None:
+            return None
+        parts = []
+        for v in col:
+            if v is None:
+                continue
+            if not isinstance(v, str):
+                raise FormatError(f"field {name} is not a text", src.dataset, _rec(src.name))
+            parts.append(v)
+        return "".join(parts) if parts else None
+
+    layers = text("layers")
+    exts = []
+    for e in (layers or "").split(","):
+        if e:
+            try:
+                exts.append(check_ext(e))
+            except ValueError as exc:
+                raise FormatError(f"field layers: {exc}", src.dataset, _rec(src.name)) from None
+    return {
+        "id": map_id,
+        "scale": scale,
+        "crs": text("crs"),
+        "notes": text("notes") or "",
+        "layers": exts,
+    }
+
+
+# --------------------------------------------------------------------------- reading: API
+
+
+def _parse_layer_map(layer_map) -> dict[str, str]:
+    if layer_map is None:
+        return {}
+    if isinstance(layer_map, str):
+        pairs = {}
+        for item in layer_map.split(","):
+            if not item.strip():
+                continue
+            name, sep, ext = item.partition("=")
+            if not sep:
+                raise DriverError(f"layer_map: {item!r} is not NAME=EXT")
+            pairs[name.strip()] = ext.strip()
+        layer_map = pairs
+    if not isinstance(layer_map, dict):
+        raise DriverError(f"layer_map is a dict or 'NAME=EXT,...', not {layer_map!r}")
+    out = {}
+    for name, ext in layer_map.items():
+        try:
+            out[str(name)] = check_ext(ext)
+        except ValueError as exc:
+            raise DriverError(f"layer_map: {name}: {exc}") from None
+    return out
+
+
+def _fallback_exts(taken: set[str]):
+    first = ["x", "y", "z"]
+    more = [a + b for a in "xyz" for b in string.ascii_lowercase]
+    for e in first + more:
+        if e not in taken:
+            yield e
+
+
+def _default_id(stem: str) -> str:
+    s = _ID_BAD.sub("_", stem)[:32]
+    return s or "MAP"
+
+
+def read(
+    path,
+    fmt="gpkg",
+    layer_map=None,
+    tolerance_m: float = 0.005,
+    default_code: int = 0,
+    code_field: str | None = "code",
+    text_field: str | None = "text",
+    progress=None,
+) -> MapFile:
+    """Read a map from an OGR dataset.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        GeoPackage: the file. Shapefile, GeoJSON, FlatGeobuf: one file (one
+        OGR layer), a directory (every file of the format in it), or
+        ``dir/NAME.<ext>`` naming the set ``dir/NAME_*.<ext>`` that
+        :func:`write` made. Shapefile also reads zipped sets (``.shz``,
+        ``.shp.zip``).
+    fmt : str
+        ``"gpkg"``, ``"shp"``, ``"geojson"`` or ``"fgb"``.
+    layer_map : dict or str, optional
+        OGR layer name -> map layer extension (``{"roads": "r"}`` or
+        ``"roads=r,rivers=h"``). Default: the extension in an apygis name
+        (``r_lines`` -> ``r``), else ``x``, ``y``, ``z``, ``xa``, ... in order.
+    tolerance_m : float
+        Distance within which line ends of foreign lines join (see
+        :func:`apygis.model.build.add_lines`).
+    default_code : int
+        Code of foreign points and lines without a code field (or with NULL).
+    code_field, text_field : str or None
+        Field names for codes and texts in foreign layers (None: not used).
+    progress : callable, optional
+        ``progress(done, total)`` after each OGR layer.
+
+    Returns
+    -------
+    MapFile
+
+    Raises
+    ------
+    FormatError
+        The file is missing, not of the format, or a layer or feature does
+        not fit (the message names the file, the layer and the feature).
+    """
+    fmt = _fmt(fmt)
+    lmap = _parse_layer_map(layer_map)
+    if isinstance(default_code, bool) or not isinstance(default_code, (int, np.integer)):
+        raise DriverError(f"default_code is an integer 0-{MAX_CODE}, not {default_code!r}")
+    if not 0 <= default_code <= MAX_CODE:
+        raise DriverError(f"default_code is 0-{MAX_CODE}, not {default_code}")
+    opts = {"default_code": int(default_code), "code_field": code_field, "text_field": text_field}
+    sources, default_id = _sources(path, fmt)
+
+    # which map layer and kind each source is
+    plan = []
+    taken = set(lmap.values())
+    for src in sources:
+        parsed = _parse_name(src.name)
+        if parsed is not None and parsed[2] != "map":
+            taken.add(parsed[1])
+    fallback = _fallback_exts(taken)
+    header_src = None
+    prefixes = set()
+    for src in sources:
+        parsed = _parse_name(src.name)
+        kind = parsed[2] if parsed else None
+        if kind == "map":
+            header_src = header_src or src
+            prefixes.add(parsed[0])
+            continue
+        if not src.spatial and parsed is None:
+            log.info("%s: layer %s has no geometry; skipped", src.dataset, src.name)
+            continue
+        ext = lmap.get(src.name) or next(
+            (e for n, e in lmap.items() if n.lower() == src.name.lower()), None
+        )
+        if ext is None:
+            ext = parsed[1] if parsed else next(fallback)
+        if parsed:
+            prefixes.add(parsed[0])
+        plan.append((src, ext, kind))
+    # L_lines and L_areas derive from L_line_points: not read where that is in the file
+    exact_lines = {ext for _, ext, kind in plan if kind == "line_points"}
+    plan = [p for p in plan if not (p[2] in ("lines", "areas") and p[1] in exact_lines)]
+
+    header = None
+    total = len(plan) + (header_src is not None)
+    done = 0
+    if header_src is not None:
+        _, _, columns = _read_layer(header_src)
+        header = _header(columns, header_src)
+        done += 1
+        if progress:
+            progress(done, total)
+
+    exact: dict[str, dict[str, np.ndarray]] = {}
+    foreign: dict[str, _Foreign] = {}
+    order: list[str] = list(header["layers"]) if header else []
+    layer_crs = None
+    for src, ext, kind in plan:
+        meta, wkb, columns = _read_layer(src)
+        if layer_crs is None and wkb is not None and isinstance(meta.get("crs"), str):
+            layer_crs = meta["crs"]
+        if ext not in order:
+            order.append(ext)
+        if kind in _EXACT:
+            tables = exact.setdefault(ext, {})
+            if kind in tables:
+                raise FormatError(
+                    f"a second {kind} layer for map layer {ext}", src.dataset, _rec(src.name)
+                )
+            tables[kind] = _exact_table(kind, wkb, columns, src)
+        else:
+            _foreign_layer(wkb, columns, src, foreign.setdefault(ext, _Foreign()), opts)
+        done += 1
+        if progress:
+            progress(done, total)
+
+    if header is not None:
+        map_id, scale, crs, notes = header["id"], header["scale"], header["crs"], header["notes"]
+    else:
+        stem = default_id
+        if len(prefixes) == 1 and None not in prefixes:
+            stem = next(iter(prefixes))
+        map_id, scale, crs, notes = _default_id(stem), None, layer_crs, ""
+    try:
+        m = MapFile(check_map_id(map_id), scale=scale, crs=crs, notes=notes)
+    except ValueError as exc:
+        raise FormatError(f"map header: {exc}", path=path) from None
+
+    for ext in order:
+        tables = exact.get(ext, {})
+        lay = Layer.from_arrays(
+            ext,
+            symbols=tables.get("symbols"),
+            line_points=tables.get("line_points"),
+            texts=tables.get("texts"),
+        )
+        acc = foreign.get(ext)
+        if acc is not None:
+            lay = _add_foreign(lay, acc, tolerance_m, path)
+        m.add_layer(lay)
+    return m
+
+
+def _add_foreign(lay: Layer, acc: _Foreign, tolerance_m, path) -> Layer:
+    from apygis.model.build import add_lines
+    from apygis.model.map import _allocate
+
+    sym, tx = lay.symbols, lay.texts
+    if acc.symbols:
+        xyz = np.concatenate([a for a, _ in acc.symbols])
+        new = np.zeros(len(xyz), SYMBOL_DTYPE)
+        new["num"] = _allocate(sym["num"], len(xyz))
+        new["x"], new["y"], new["z"] = xyz.T
+        new["code"] = np.concatenate([c for _, c in acc.symbols])
+        sym = np.concatenate([sym, new])
+    if acc.texts:
+        xyz = np.concatenate([a for a, _ in acc.texts])
+        new = np.zeros(len(xyz), TEXT_DTYPE)
+        new["num"] = _allocate(tx["num"], len(xyz))
+        new["x"], new["y"], new["z"] = xyz.T
+        new["text"] = np.concatenate([t for _, t in acc.texts])
+        tx = np.concatenate([tx, new])
+    lay = Layer.from_arrays(lay.ext, sym, lay.line_points, tx)
+    if acc.lines:
+        try:
+            add_lines(
+                lay, acc.lines, acc.line_codes, closed=acc.line_closed, tolerance_m=tolerance_m
+            )
+        except FormatError:
+            raise
+        except (ValueError, TypeError) as exc:  # a bad tolerance_m, a line add_lines refuses
+            raise FormatError(f"layer {lay.ext}: {exc}", path=path) from None
+    return lay
+
+
+# --------------------------------------------------------------------------- probes, drivers
+
+
+def _head(p: Path, n: int) -> bytes:
+    try:
+        with open(p, "rb") as fh:
+            return fh.read(n)
+    except OSError:
+        return b""
+
+
+def _probe_gpkg(path) -> bool:
+    p = Path(path)
+    if not p.is_file():
+        return False
+    head = _head(p, 72)
+    return head.startswith(b"SQLite format 3\0") and head[68:72] in (b"GPKG", b"GP10", b"GP11")
+
+
+def _probe_set(path, fmt: _Format, content: Callable[[Path], bool]) -> bool:
+    p = Path(path)
+    if p.is_file():
+        return content(p)
+    if p.is_dir():
+        return any(q.is_file() and q.suffix[1:].lower() in fmt.extensions for q in p.iterdir())
+    if p.suffix[1:].lower() in fmt.extensions and p.parent.is_dir():
+        return bool(_member_files(p.parent, fmt, p.stem))
+    return False
+
+
+def _is_shp(p: Path) -> bool:
+    head = _head(p, 4)
+    if head == b"\x00\x00\x27\x0a":
+        return True
+    if p.suffix[1:].lower() in _SHP.containers and head.startswith(b"PK"):
+        import zipfile
+
+        try:
+            with zipfile.ZipFile(p) as z:
+                return any(n.lower().endswith(".shp") for n in z.namelist())
+        except (zipfile.BadZipFile, OSError, ValueError):
+            return False
+    return False
+
+
+def _is_geojson(p: Path) -> bool:
+    head = _head(p, 4096).lstrip(b"\xef\xbb\xbf \t\r\n")
+    return head.startswith(b"{") and (b'"FeatureCollection"' in head or b'"Feature"' in head)
+
+
+def _is_fgb(p: Path) -> bool:
+    head = _head(p, 8)
+    return len(head) == 8 and head[:3] == b"fgb" and head[4:7] == b"fgb"
+
+
+def _driver(fmt: _Format, description: str, probe: Callable) -> Driver:
+    def reader(path, **options):
+        return read(path, fmt, **options)
+
+    def writer(map_, path, **options):
+        return write(map_, path, fmt, **options)
+
+    def outs(map_, path):
+        return outputs(map_, path, fmt)
+
+    reader.__doc__ = f"Read a map from {fmt.ogr} (see :func:`apygis.formats.ogr.read`)."
+    writer.__doc__ = f"Write a map as {fmt.ogr} (see :func:`apygis.formats.ogr.write`)."
+    return Driver(
+        name=fmt.name,
+        description=description,
+        extensions=fmt.extensions,  # zipped Shapefiles are recognised by content
+        reader=reader,
+        writer=writer,
+        probe=probe,
+        outputs=outs,
+    )
+
+
+GPKG = _driver(_GPKG, "GeoPackage: every layer in one file (docs/formats/ogr.md)", _probe_gpkg)
+SHP = _driver(
+    _SHP,
+    "ESRI Shapefile: one .shp set per OGR layer in a directory (docs/formats/ogr.md)",
+    lambda p: _probe_set(p, _SHP, _is_shp),
+)
+GEOJSON = _driver(
+    _GEOJSON,
+    "GeoJSON: one file per OGR layer in a directory (docs/formats/ogr.md)",
+    lambda p: _probe_set(p, _GEOJSON, _is_geojson),
+)
+FGB = _driver(
+    _FGB,
+    "FlatGeobuf: one file per OGR layer in a directory (docs/formats/ogr.md)",
+    lambda p: _probe_set(p, _FGB, _is_fgb),
+)
