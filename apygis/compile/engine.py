@@ -45,8 +45,11 @@ SAMPLE
     is entered as a point (or the mark itself if there was none), and the
     track becomes (B, new point). ENTER, SEARCH and PROCEED keep working.
 
-Heights: UP/DOWN change the mark's model height by ``geometry.height_step_m``;
-recorded heights are ``geometry.correct_z`` (the dpZ correction) of it.
+Heights: UP/DOWN change the mark's model height by ``geometry.height_step_m``
+(ten times that after STEP, which toggles fine and coarse); recorded heights
+are ``geometry.correct_z`` (the dpZ correction) of it. SHUTTER toggles where
+the floating mark is seen (map or model); PLUS and MINUS are for symbol
+creation and do nothing here.
 """
 
 from __future__ import annotations
@@ -266,6 +269,8 @@ class Engine:
         self.delete_kind: str | None = None
         self.proceed_item: int | None = None
         self.terminated = False
+        self.coarse = False
+        self.view = "map"
         self._undo: list[tuple] = []
 
     # ------------------------------------------------------------------ helpers
@@ -286,7 +291,9 @@ class Engine:
         return math.floor(round(z * f, 6)) / f
 
     def _status(self, prompt: str = "") -> Status:
-        return Status(self.mode, self.layer_ext, prompt, self.mark(), self.layer.counts())
+        lay = self.layer
+        counts = {t: len(lay.table(t)) for t in APY_CAPACITY}
+        return Status(self.mode, self.layer_ext, prompt, self.mark(), counts)
 
     def _snapshot(self):
         state = (self.line_first, self.line_end, self.sampling, self.last_inside)
@@ -353,8 +360,15 @@ class Engine:
             return out
         b = event.button
         if b in ("UP", "DOWN"):
-            self.z_model += self.geometry.height_step_m * (1 if b == "UP" else -1)
+            step = self.geometry.height_step_m * (10 if self.coarse else 1)
+            self.z_model += step if b == "UP" else -step
             self._plates(out)
+        elif b == "STEP":
+            self.coarse = not self.coarse
+            out.append(Message(f"height step {'coarse (x10)' if self.coarse else 'fine'}"))
+        elif b == "SHUTTER":
+            self.view = "model" if self.view == "map" else "map"
+            out.append(Message(f"floating mark seen in the {self.view}"))
         elif b == "UNDO":
             self._on_undo(out)
         elif b in DIGITS or b == "POINT":

@@ -413,3 +413,17 @@ def test_event_dicts_round_trip():
         assert event_from_dict(event_to_dict(ev)) == ev
     with pytest.raises(ValueError, match="not an event"):
         event_from_dict({"x": 1})
+
+
+def test_step_shutter_and_status_counts():
+    op = Op()
+    op.eng.z_model = 100.0
+    op.at(0, 0)
+    op.press("STEP", "UP")
+    assert op.eng.mark()[2] == pytest.approx(100.5)
+    op.press("STEP", "UP")
+    assert op.eng.mark()[2] == pytest.approx(100.55)
+    out = op.press("SHUTTER")
+    assert Message("floating mark seen in the model") in out
+    status = out[-1]
+    assert status.counts == {"symbols": 0, "line_points": 0, "texts": 0}
