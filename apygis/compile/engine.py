@@ -12,7 +12,8 @@ Events
     ``"UNDO"``, ``"POINT"``, ...; see ``docs/button-pad.md``),
     :class:`Keys` (text typed on the keyboard).
 Effects
-    :class:`Added` / :class:`Deleted` (records), :class:`Undone`,
+    :class:`Added` / :class:`Deleted` (records), :class:`Linked` (a line
+    end joined by SEARCH), :class:`Undone`,
     :class:`Message` (for the operator's monitor), :class:`Status` (mode,
     item, counts, mark), :class:`Plates` (motor positions for the four
     correction plates), :class:`ZeroPlates` (eliminate parallax),
@@ -70,6 +71,7 @@ __all__ = [
     "Deleted",
     "Engine",
     "Keys",
+    "Linked",
     "Mark",
     "Message",
     "Plates",
@@ -158,6 +160,16 @@ class Deleted:
 
 
 @dataclass(frozen=True)
+class Linked:
+    """Line point ``num`` was joined to ``target`` (``how``: "closed" or "branch")."""
+
+    layer: str
+    num: int
+    target: int
+    how: str
+
+
+@dataclass(frozen=True)
 class Undone:
     layer: str
 
@@ -196,7 +208,7 @@ class Terminate:
     pass
 
 
-RECORD_EFFECTS = (Added, Deleted, Undone)
+RECORD_EFFECTS = (Added, Deleted, Linked, Undone)
 
 
 # --------------------------------------------------------------------------- engine
@@ -224,6 +236,9 @@ class Engine:
         Entries between automatic saves.
     undo_depth : int
         Entries that UNDO can take back.
+    start_z_m : float
+        The floating mark's model height at the start (the session uses the
+        mean height of the map's records), metres.
     """
 
     def __init__(
@@ -237,6 +252,7 @@ class Engine:
         sample_tolerance_mm: float = 0.2,
         autosave_every: int = 50,
         undo_depth: int = 100,
+        start_z_m: float = 0.0,
     ):
         self.map = map
         self.layer_ext = check_ext(layer)
@@ -251,7 +267,7 @@ class Engine:
         self.mode = "menu"
         self.buf = ""
         self.mark_xy: tuple[float, float] | None = None
-        self.z_model = 0.0
+        self.z_model = float(start_z_m)
         self.entries = 0
         self.since_save = 0
         self.display_scale = 1.0
@@ -596,7 +612,7 @@ class Engine:
             return
         self._snapshot()
         how = self.layer.join(self.line_end, target)
-        out.append(Added(self.layer_ext, "line_points", self.line_end))
+        out.append(Linked(self.layer_ext, self.line_end, target, how))
         out.append(Message(f"SEARCH: line {'closed' if how == 'closed' else 'joined'} at {target}"))
         self._entry(out)
         self._reset_line()

@@ -144,7 +144,7 @@ class Recorder:
             "created": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         }
         if meta:
-            header.update({k: v for k, v in meta.items() if k not in header})
+            header.update({k: v for k, v in meta.items() if k not in ("format", "version")})
         self._t0 = clock()
         self._last = 0.0
         self._write(json.dumps(header) + "\n")

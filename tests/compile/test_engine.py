@@ -12,6 +12,7 @@ from apygis.compile.engine import (
     Deleted,
     Engine,
     Keys,
+    Linked,
     Mark,
     Message,
     Plates,
@@ -52,7 +53,7 @@ class Op:
     def press(self, *buttons):
         out = []
         for b in buttons:
-            for part in [b] if len(b) > 1 else list(b):
+            for part in list(b) if b.isdigit() else [b]:
                 out += self.send(Press(part))
         return out
 
