@@ -114,7 +114,6 @@ def session(
     )
     try:
         if recover_only:
-            sess.close()
             return
         parser = make_parser(protocol, config)
         decoder = ReportDecoder(config, BUTTONS)
@@ -155,6 +154,7 @@ def _live(sess, url, parser, decoder, record, protocol, config):
     if record:
         rec = Recorder(record, meta={"protocol": protocol, "counts_per_mm": config.counts_per_mm})
         port = rec.wrap(port, "tablet")
+    click.echo(f"tablet {protocol} on {url}: ready")
     typed: queue.Queue = queue.Queue()
 
     def keyboard():

@@ -143,6 +143,7 @@ class Session:
         self.entries = 0
         self.saves = 0
         self.finished = False
+        self._closed = False
         self._last_status = None
         if self.journal_path.exists():
             j = read_journal(self.journal_path)
@@ -166,6 +167,7 @@ class Session:
                 self.map = apygis.read(self.base, driver="apy")
             else:
                 self.map = MapFile(self.base.name, scale=scale, crs=crs)
+                self.base.parent.mkdir(parents=True, exist_ok=True)
             self.settings.setdefault("start_z_m", _mean_height(self.map))
             self.engine = self._engine(layer)
             self.journal = Journal.create(self.journal_path, self.map, layer, self.settings)
@@ -285,7 +287,8 @@ class Session:
 
     def close(self) -> None:
         """End without terminating (input ended): save, keep the journal for a resume."""
-        if not self.finished:
+        if not self.finished and not self._closed:
+            self._closed = True
             self.save("end of input")
             self.journal.close(remove=False)
             self.monitor(f"session not terminated: journal {self.journal_path.name} kept")

@@ -12,7 +12,6 @@ from apygis.compile.engine import (
     Deleted,
     Engine,
     Keys,
-    Linked,
     Mark,
     Message,
     Plates,
