@@ -29,7 +29,6 @@ import argparse
 import json
 import sys
 import tempfile
-import time
 import warnings
 from pathlib import Path
 
@@ -40,7 +39,7 @@ import apygis
 from apygis.formats import drivers
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_native import make_map
+from bench_native import best, make_map
 
 try:
     import pyarrow  # noqa: F401
@@ -92,15 +91,6 @@ def _copy_layers(src: Path, dst: Path, driver: str) -> None:
                     geometry_type=meta["geometry_type"],
                     crs=meta["crs"],
                 )
-
-
-def best(fn, repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def main() -> None:

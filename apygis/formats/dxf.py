@@ -69,7 +69,7 @@ import numpy as np
 from apygis.errors import ApygisError, DriverError, FormatError, ValueRangeError
 from apygis.formats import Driver
 from apygis.formats._io import atomic_write_many, read_bytes
-from apygis.model import topology
+from apygis.model.build import export_lines
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, crs_string
 from apygis.model.records import (
     LINE_DTYPE,
@@ -423,33 +423,22 @@ def _line_entities(layer: Layer, owner: int, start: int):
     lp = layer.line_points
     if not len(lp):
         return [], start
-    cs = topology.chains(lp)
-    k = len(cs)
-    lens = cs.lengths()
-    first = cs.order[cs.offsets[:-1]]
-    last = cs.order[cs.offsets[1:] - 1]
-    open_ = ~cs.closed
-    # branch ends: the junction's vertex drawn as an extra first / last vertex
-    pre = np.where(open_, topology.lookup(lp["num"], lp["back"][first]), -1)
-    post = np.where(open_, topology.lookup(lp["num"], lp["fwd"][last]), -1)
-    post = np.where((post >= 0) & (post == pre) & (first == last), -1, post)
-    has_pre, has_post = pre >= 0, post >= 0
-    nverts = lens + has_pre + has_post
+    ls = export_lines(layer)  # branch ends carry their junction's vertex (no XDATA)
+    nverts = np.diff(ls.offsets)
     ents = nverts + 2  # POLYLINE + vertices + SEQEND
     eoff = np.r_[0, np.cumsum(ents)]  # entity slots per chain
     pl_handle = start + eoff[:-1]
-
-    cid = np.repeat(np.arange(k), lens)
-    pos = np.arange(len(cs.order)) - cs.offsets[cid]
-    slot = eoff[cid] + 1 + has_pre[cid] + pos  # slot of each own vertex, in chain order
-    rows = cs.order
+    cid = ls.line_index()
+    slot = eoff[cid] + 1 + np.arange(len(ls.rows)) - ls.offsets[cid]  # slot of every vertex
     lay = layer.ext
     pieces = np.empty(int(eoff[-1]), dtype=object)
-    pieces[slot] = [
+    own = ls.own
+    rows, oslot, ocid = ls.rows[own], slot[own], cid[own]
+    pieces[oslot] = [
         _VERTEX_OWN % t
         for t in zip(
-            (start + slot).tolist(),
-            pl_handle[cid].tolist(),
+            (start + oslot).tolist(),
+            pl_handle[ocid].tolist(),
             [lay] * len(rows),
             lp["x"][rows].tolist(),
             lp["y"][rows].tolist(),
@@ -464,25 +453,20 @@ def _line_entities(layer: Layer, owner: int, start: int):
             strict=True,
         )
     ]
-    for mask, src, where in (
-        (has_pre, pre, eoff[:-1] + 1),
-        (has_post, post, eoff[1:] - 2),
-    ):
-        ch = np.flatnonzero(mask)
-        r = src[ch]
-        pieces[where[ch]] = [
-            _VERTEX % t
-            for t in zip(
-                (start + where[ch]).tolist(),
-                pl_handle[ch].tolist(),
-                [lay] * len(ch),
-                lp["x"][r].tolist(),
-                lp["y"][r].tolist(),
-                lp["z"][r].tolist(),
-                strict=True,
-            )
-        ]
-    flags = np.where(cs.closed, 9, 8)
+    r, xslot, xcid = ls.rows[~own], slot[~own], cid[~own]
+    pieces[xslot] = [
+        _VERTEX % t
+        for t in zip(
+            (start + xslot).tolist(),
+            pl_handle[xcid].tolist(),
+            [lay] * len(r),
+            lp["x"][r].tolist(),
+            lp["y"][r].tolist(),
+            lp["z"][r].tolist(),
+            strict=True,
+        )
+    ]
+    flags = np.where(ls.closed, 9, 8)
     pieces[eoff[:-1]] = [
         _POLYLINE % (h, owner, lay, f)
         for h, f in zip(pl_handle.tolist(), flags.tolist(), strict=True)

@@ -59,8 +59,10 @@ class LineSet(Sequence):
     """The lines of a layer in CSR form; a sequence of :class:`Polyline`.
 
     ``coords[offsets[k]:offsets[k + 1]]`` are the vertices of line ``k`` and
-    ``nums[...]`` the same slice of point numbers. A closed line does not
-    repeat its first vertex. Writers that build geometries for a whole layer
+    ``nums[...]`` the same slice of point numbers; ``rows`` are the vertices'
+    rows in the layer's line-point table and ``own`` is False for a junction
+    vertex added to a branch end. A closed line does not repeat its first
+    vertex. Writers that build geometries for a whole layer
     at once use the arrays (``shapely.linestrings(coords, indices=...)``).
     """
 
@@ -69,6 +71,8 @@ class LineSet(Sequence):
     offsets: np.ndarray
     codes: np.ndarray
     closed: np.ndarray
+    rows: np.ndarray
+    own: np.ndarray
 
     def __len__(self) -> int:
         return len(self.codes)
@@ -121,6 +125,8 @@ def export_lines(layer) -> LineSet:
             np.zeros(1, np.int64),
             np.zeros(0, np.int16),
             np.zeros(0, bool),
+            np.zeros(0, np.int64),
+            np.zeros(0, bool),
         )
     first = cs.order[cs.offsets[:-1]]
     last = cs.order[cs.offsets[1:] - 1]
@@ -138,12 +144,17 @@ def export_lines(layer) -> LineSet:
     src[offsets[cid] + has_pre[cid] + pos] = cs.order
     src[offsets[:-1][has_pre]] = pre[has_pre]
     src[offsets[1:][has_post] - 1] = post[has_post]
+    own = np.ones(len(src), dtype=bool)
+    own[offsets[:-1][has_pre]] = False
+    own[offsets[1:][has_post] - 1] = False
     return LineSet(
         coords=xyz[src],
         nums=lp["num"][src].astype(np.int64),
         offsets=offsets,
         codes=lp["code"][first].astype(np.int16),
         closed=cs.closed.copy(),
+        rows=src,
+        own=own,
     )
 
 
