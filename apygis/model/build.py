@@ -18,7 +18,9 @@ with references again, rebuilding the topology that plain geometry lost:
 
   A vertex that has become a junction or a merge point stays. A line keeps
   at least one vertex: if its last remaining vertex coincides with another
-  line, it is linked there without being dropped.
+  line, it is linked there without being dropped (a short connector between
+  two lines is joined at both ends), unless that line is already joined to
+  it (a segment digitised twice is not folded onto itself).
 * "Coincide" means a planimetric (X, Y) distance of at most ``tolerance_m``;
   the nearest candidate wins, ties going to the one read first.
 
@@ -253,6 +255,7 @@ def add_lines(
             return ex_side_free[t - n] > 0
         return (side[t] < 0).any()
 
+    joined: set[frozenset] = set()
     ends = []
     for i in np.flatnonzero(keep_line & ~want_closed & (lens >= 2)):
         ends += [(starts[i], "start", i), (starts[i] + lens[i] - 1, "end", i)]
@@ -267,6 +270,11 @@ def add_lines(
             for t in tree.query_ball_point(xyz[v, :2], tol)
             if t != v and t != inner and (t >= n or not dropped[t])
         ]
+        can_drop = remaining[i] > 1 and inner >= 0
+        if not can_drop:
+            # the line's last vertex: joining it to a line it is already joined to would
+            # only fold the two onto each other (a segment digitised twice)
+            cands = [t for t in cands if t >= n or frozenset((i, line_of[t])) not in joined]
         if not cands:
             continue
         d = np.hypot(*(np.r_[xyz[:, :2], ex_xy][cands] - xyz[v, :2]).T)
@@ -289,7 +297,6 @@ def add_lines(
             log.info("line end at %.3f, %.3f: the junction has no free side reference", *xyz[v, :2])
             continue
         t, merge = target
-        can_drop = remaining[i] > 1 and inner >= 0
         me = inner if can_drop else v
         if can_drop:
             dropped[v] = True
@@ -309,8 +316,8 @@ def add_lines(
             else:
                 side[t, np.flatnonzero(side[t] < 0)[0]] = me
         if t < n:
-            pinned[t] = True
-        pinned[me] = True
+            pinned[t] = True  # a junction or merge point stays
+            joined.add(frozenset((i, line_of[t])))
 
     # 3. numbers for the kept rows, references from rows to numbers
     keep = ~dropped

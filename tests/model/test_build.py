@@ -127,3 +127,15 @@ def test_property_export_rebuild_keeps_geometry(lay):
 def fresh_xyz(lay):
     lp = lay.line_points
     return np.column_stack([lp["x"], lp["y"], lp["z"]])
+
+
+@pytest.mark.parametrize(
+    "connector",
+    [[(10, 0), (10, 10)], [(10, 0), (10, 5), (10, 10)], [(10, 0), (10, 4), (10, 6), (10, 10)]],
+)
+def test_a_line_touching_two_lines_is_joined_at_both_ends(connector):
+    lay = apygis.Layer("r")
+    add_lines(lay, [[(0, 0), (10, 0), (20, 0)], [(0, 10), (10, 10), (20, 10)], connector], 1)
+    junctions = sorted(b["junction"] for b in lay.branches())
+    assert junctions == [2, 5]
+    assert lay.validate() == []
