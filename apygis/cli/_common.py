@@ -50,7 +50,7 @@ class _Null:
         return len(s)
 
     def flush(self):
-        pass
+        """Nothing is buffered."""
 
     def isatty(self):
         return False

@@ -195,7 +195,7 @@ class Plates:
 
 @dataclass(frozen=True)
 class ZeroPlates:
-    pass
+    """Eliminate parallax: the plates' present position becomes their zero."""
 
 
 @dataclass(frozen=True)
@@ -205,7 +205,7 @@ class Save:
 
 @dataclass(frozen=True)
 class Terminate:
-    pass
+    """The operator terminated compilation (PROCEED menu, item 4)."""
 
 
 RECORD_EFFECTS = (Added, Deleted, Linked, Undone)

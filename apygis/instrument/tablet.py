@@ -70,6 +70,7 @@ Examples
 
 from __future__ import annotations
 
+import abc
 import logging
 import math
 import re
@@ -325,7 +326,7 @@ def encode_ascii(
 # --------------------------------------------------------------------------- parsers
 
 
-class Parser:
+class Parser(abc.ABC):
     """Incremental tablet parser: bytes in, :class:`Report` objects out.
 
     Parameters
@@ -361,21 +362,21 @@ class Parser:
         self.rejected = 0
         self._garbage = False
 
+    @abc.abstractmethod
     def feed(self, data: bytes) -> list[Report]:
         """Take a chunk of bytes; return the reports it completed, in order."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def flush(self) -> list[Report]:
         """The line went quiet: decode a complete pending packet, drop a partial one."""
-        raise NotImplementedError
 
     def reset(self) -> None:
         """Forget any partial packet (after a reconnect); keep the counters."""
         self._garbage = False
 
+    @abc.abstractmethod
     def encode(self, report: Report) -> bytes:
         """The bytes this format sends for ``report``."""
-        raise NotImplementedError
 
     @property
     def stats(self) -> dict[str, int]:
@@ -459,8 +460,9 @@ class _BinaryParser(Parser):
         self._discard(len(run))
         return []
 
+    @abc.abstractmethod
     def _decode(self, run: bytes) -> Report | None:
-        raise NotImplementedError
+        """The report a complete packet holds, or None (counted as rejected)."""
 
     def _reject(self, run: bytes, why: str) -> None:
         self.rejected += 1

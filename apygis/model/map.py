@@ -273,11 +273,9 @@ class Layer:
         t = self._tables["line_points"]
         lp = t.rows()
         i, j = self._line_row(a), self._line_row(b)
-        if lp["fwd"][i] == b and lp["back"][j] == a:
-            pass
-        elif lp["fwd"][j] == a and lp["back"][i] == b:
+        if lp["fwd"][j] == a and lp["back"][i] == b:  # given against the line's direction
             i, j, a, b = j, i, b, a
-        else:
+        elif not (lp["fwd"][i] == b and lp["back"][j] == a):
             raise TopologyError(f"layer {self.ext}: line points {a} and {b} are not neighbours")
         num = int(_allocate(lp["num"], 1)[0])
         lp["fwd"][i] = num

@@ -18,7 +18,7 @@ from tests.formats.strategies import maps, random_rows, small_map
 
 EXTERNAL = Path(__file__).resolve().parents[3] / "shared" / "external"
 FOREIGN = sorted(EXTERNAL.glob("ezdxf/*.dxf")) + sorted(EXTERNAL.glob("gdal/*.dxf"))
-needs_external = pytest.mark.skipif(not FOREIGN, reason="shared/external is not there")
+assert FOREIGN, f"the external DXF samples are missing from {EXTERNAL}"
 
 
 # --------------------------------------------------------------------------- helpers
@@ -403,7 +403,6 @@ def test_gdal_reads_what_we_write(sample_map, tmp_path):
 # --------------------------------------------------------------------------- foreign files
 
 
-@needs_external
 @pytest.mark.parametrize("path", FOREIGN, ids=lambda p: p.name)
 def test_foreign_files_read_with_their_entity_counts(path):
     want = _expected_counts(path)
@@ -423,7 +422,6 @@ def test_foreign_files_read_with_their_entity_counts(path):
         assert all(len(t) <= 24 for t in lay.texts["text"].tolist())
 
 
-@needs_external
 def test_ocs_polylines_are_read_in_world_coordinates():
     path = EXTERNAL / "gdal" / "LWPOLYLINE-OCS.dxf"
     m = apygis.read(path, topology=False)
@@ -443,7 +441,6 @@ def test_ocs_polylines_are_read_in_world_coordinates():
     assert np.min(np.abs(xyz - [600325.568, 3153021.253, 562.760]).max(axis=1)) < 1e-3
 
 
-@needs_external
 def test_foreign_details_points_texts_inserts():
     leica = apygis.read(EXTERNAL / "ezdxf" / "Leica_Disto_S910.dxf")
     (lay,) = leica.layers.values()
@@ -465,7 +462,6 @@ def test_foreign_details_points_texts_inserts():
     assert _totals(assorted)["texts"] == 1
 
 
-@needs_external
 def test_circles_are_flattened_to_closed_lines_on_the_circle():
     path = EXTERNAL / "ezdxf" / "text_alignments.dxf"
     circles = [t for kind, t, _ in _raw_entities(path) if kind == "CIRCLE"]
@@ -503,7 +499,6 @@ def test_binary_dxf_is_read(sample_map, tmp_path):
         assert isinstance(got, apygis.MapFile) or "m.dxf" in str(got)
 
 
-@needs_external
 def test_layer_map_default_ext_and_skipping():
     path = EXTERNAL / "ezdxf" / "Leica_Disto_S910.dxf"
     m = apygis.read(
