@@ -52,11 +52,14 @@ def _copy_map(src_base, out_dir, overwrite: bool):
 @click.option("--overwrite", is_flag=True, help="Replace files of an earlier run in --output.")
 @click.option("--recover-only", is_flag=True, help="Recover a journal, save, and stop.")
 @click.option("--library", type=click.Path(), help="Symbol library.")
+@click.option(
+    "--pad", type=click.Path(dir_okay=False), help="Button pad file (docs/button-pad.md)."
+)
 @click.option("--realtime", is_flag=True, help="Replay at the recorded pace.")
 @run_guarded
 def session(
     map_path, orientation, layer, tablet, motors, replay, record, output, overwrite,
-    recover_only, library, realtime,
+    recover_only, library, pad, realtime,
 ):  # fmt: skip
     """Run a revision session on MAP (dir/ID), or replay a recorded one.
 
@@ -116,7 +119,12 @@ def session(
         if recover_only:
             return
         parser = make_parser(protocol, config)
-        decoder = ReportDecoder(config, BUTTONS)
+        if pad:
+            from apygis.instrument.pad import load_pad
+
+            decoder = ReportDecoder(config, load_pad(pad))
+        else:
+            decoder = ReportDecoder(config, BUTTONS)
         if replay:
             run_tablet_stream(sess, Replayer(replay, realtime=realtime).chunks(), parser, decoder)
         else:

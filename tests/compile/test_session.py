@@ -335,3 +335,19 @@ def _nonempty(m):
     for ext in [e for e, lay in m.layers.items() if not len(lay)]:
         del m.layers[ext]
     return m
+
+
+def test_session_takes_a_pad_file(tmp_path):
+    pad = tmp_path / "same.pad"
+    pad.write_text("11 ENTER\n13 PROCEED\n")
+    _replay_cli(tmp_path / "a", "--pad", str(pad))
+    expected = apygis.read(SESSION / "ZH1091-revision.expected.apa")
+    assert apygis.read(tmp_path / "a" / "ZH1091") == expected
+    pad.write_text("11 JUMP\n")
+    res = CliRunner().invoke(
+        main,
+        ["session", str(SAMPLES / "ZH1091"), "--orientation", str(ORIENTATION),
+         "--replay", str(RECORDING), "-o", str(tmp_path / "b"), "--pad", str(pad)],
+    )  # fmt: skip
+    assert res.exit_code == 1
+    assert "same.pad: line 1: unknown button 'JUMP'" in res.output

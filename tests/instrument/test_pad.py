@@ -1,0 +1,44 @@
+"""Pad files: a cursor whose buttons send other codes."""
+
+from __future__ import annotations
+
+import pytest
+
+from apygis.compile.engine import Press
+from apygis.compile.session import ReportDecoder
+from apygis.errors import FormatError
+from apygis.instrument.pad import load_pad, parse_pad
+from apygis.instrument.simulator import BUTTONS
+from apygis.instrument.tablet import Report, TabletConfig
+
+
+def test_moved_buttons_leave_their_default_codes(tmp_path):
+    f = tmp_path / "puck.pad"
+    f.write_text("; thumb buttons\n13 ENTER\n11 proceed ; swapped\n\n")
+    pad = load_pad(f)
+    assert (pad[13], pad[11], pad[1]) == ("ENTER", "PROCEED", "1")
+    assert list(pad.values()).count("ENTER") == 1
+    assert len(parse_pad("5 ENTER\n", replace=True)) == 1
+    dec = ReportDecoder(TabletConfig(), pad)
+    assert dec.events(Report(10, 10, 13))[-1] == Press("ENTER")
+    assert dec.events(Report(10, 10, 0)) == []
+    assert dec.events(Report(10, 10, 11)) == [Press("PROCEED")]
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("13\n", "line 1: expected 'CODE NAME'"),
+        ("x ENTER\n", "expected 'CODE NAME'"),
+        ("300 ENTER\n", "outside 1-255"),
+        ("5 JUMP\n", "unknown button 'JUMP'"),
+        ("5 ENTER\n6 ENTER\n", "line 2: ENTER is already on code 5"),
+    ],
+)
+def test_bad_pad_files(text, match):
+    with pytest.raises(FormatError, match=match):
+        parse_pad(text, "p.pad")
+
+
+def test_default_pad_is_unchanged_without_a_file():
+    assert parse_pad("") == BUTTONS
