@@ -9,6 +9,16 @@ import click
 from apygis.cli._common import progress_bar, run_guarded
 
 
+def _outputs(paths: list[str]) -> str:
+    """The files written, or a summary of them when there are many."""
+    if len(paths) <= 4:
+        return ", ".join(paths)
+    from pathlib import Path
+
+    folders = sorted({str(Path(p).parent) for p in paths})
+    return f"{len(paths)} files in {', '.join(folders)} ({Path(paths[0]).name}, ...)"
+
+
 def _layer_map(ctx, param, value):
     if value is None:
         return None
@@ -65,13 +75,15 @@ def convert(paths, to_format, driver, src_driver, to_crs, layer_map, snap, jobs,
         "read_options": read_options,
     }
     sources = expand_sources(srcs)
-    batch = to_format is not None or len(sources) > 1 or Path(dst).is_dir()
+    # one source into an existing folder is a batch of one, unless --driver names
+    # the writer (shp, geojson, fgb and apy write into folders themselves)
+    batch = to_format is not None or len(sources) > 1 or (Path(dst).is_dir() and not driver)
     if not batch:
         res = convert_file(sources[0], dst, driver=driver, **common)
         if not res.ok:
             raise click.ClickException(res.error)
         click.echo(
-            f"{res.source} -> {', '.join(res.outputs)}: {res.layers} layers, {res.records} records"
+            f"{res.source} -> {_outputs(res.outputs)}: {res.layers} layers, {res.records} records"
         )
         return
     if to_format is None:
@@ -88,7 +100,7 @@ def convert(paths, to_format, driver, src_driver, to_crs, layer_map, snap, jobs,
     for res in results:
         if res.ok:
             click.echo(
-                f"{res.source} -> {', '.join(res.outputs)}: "
+                f"{res.source} -> {_outputs(res.outputs)}: "
                 f"{res.layers} layers, {res.records} records"
             )
         else:
