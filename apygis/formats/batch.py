@@ -108,7 +108,17 @@ def convert_file(
         if not overwrite:
             existing = [str(p) for p in out_drv.targets(m, dst) if p.exists()]
             if existing:
-                raise FileOverwriteError(f"{', '.join(existing)} exists; use --overwrite")
+                what = (
+                    existing[0]
+                    if len(existing) == 1
+                    else (
+                        f"{existing[0]} and {len(existing) - 1} more files"
+                        if len(existing) > 3
+                        else ", ".join(existing)
+                    )
+                )
+                verb = "exists" if len(existing) == 1 else "exist"
+                raise FileOverwriteError(f"{what} {verb}; use --overwrite")
         written = apygis.write(m, dst, driver=out_drv.name)
         return Result(src, [str(p) for p in written], sum(len(lay) for lay in m), len(m.layers))
     except ApygisError as exc:

@@ -78,3 +78,15 @@ def test_usage_errors():
     res = _run("convert", "a.apa", "b.apa", "out")
     assert res.exit_code == 2
     assert "--to FORMAT" in res.output
+
+
+def test_one_source_into_a_folder_with_a_folder_driver(sample_dir, tmp_path):
+    out = tmp_path / "gj"
+    out.mkdir()
+    res = _run("convert", sample_dir / "ZH1091", out, "--driver", "geojson")
+    assert res.exit_code == 0, res.output
+    assert "files in" in res.output
+    assert apygis.read(out / "ZH1091.geojson") == apygis.read(sample_dir / "ZH1091")
+    res = _run("convert", sample_dir / "ZH1091", out, "--driver", "geojson")
+    assert res.exit_code == 1
+    assert "more files exist; use --overwrite" in res.output
