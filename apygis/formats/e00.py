@@ -836,12 +836,17 @@ def _floats(fields: list[bytes], cur: _Cursor, lines: list[int], what: str) -> n
     return arr  # pragma: no cover
 
 
-def _fixed_reals(rows: list[bytes], lines: np.ndarray, width: int, nvals: int, cur, what):
-    """``nvals`` reals of ``width`` columns from each row: an ``(nrows, nvals)`` array."""
+def _fixed_fields(rows: list[bytes], width: int, nvals: int) -> np.ndarray:
+    """The first ``nvals`` fields of ``width`` columns of each row, as an (nrows, nvals) S array."""
     w = width * nvals
     raw = b"".join(r[:w].ljust(w) for r in rows)
     m = np.frombuffer(raw, np.uint8).reshape(len(rows), nvals, width)
-    fields = np.ascontiguousarray(m).view(f"S{width}").reshape(len(rows), nvals)
+    return np.ascontiguousarray(m).view(f"S{width}").reshape(len(rows), nvals)
+
+
+def _fixed_reals(rows: list[bytes], lines: np.ndarray, width: int, nvals: int, cur, what):
+    """``nvals`` reals of ``width`` columns from each row: an ``(nrows, nvals)`` array."""
+    fields = _fixed_fields(rows, width, nvals)
     try:
         v = fields.astype(np.float64)
         if np.isfinite(v).all():
@@ -966,10 +971,7 @@ def _parse_labels(cur: _Cursor, prec: int, out: dict) -> None:
 
 
 def _fixed_ints(rows: list[bytes], lines: np.ndarray, width: int, nvals: int, cur, what):
-    w = width * nvals
-    raw = b"".join(r[:w].ljust(w) for r in rows)
-    m = np.frombuffer(raw, np.uint8).reshape(len(rows), nvals, width)
-    fields = np.ascontiguousarray(m).view(f"S{width}").reshape(len(rows), nvals)
+    fields = _fixed_fields(rows, width, nvals)
     try:
         return fields.astype(np.int64)
     except (ValueError, OverflowError):

@@ -464,6 +464,17 @@ class _BinaryParser(Parser):
     def _decode(self, run: bytes) -> Report | None:
         """The report a complete packet holds, or None (counted as rejected)."""
 
+    def _plausible(self, x: int, y: int, button: int, proximity: bool, run: bytes):
+        """The report, if its position and button pass the configured limits; else None."""
+        if not (self._xlo <= x <= self._xhi and self._ylo <= y <= self._yhi):
+            self._reject(run, f"position {x}, {y} outside the active area")
+            return None
+        if button > self._maxb:
+            self._reject(run, f"button {button} above {self._maxb}")
+            return None
+        self._garbage = False
+        return Report(x, y, button, proximity, run)
+
     def _reject(self, run: bytes, why: str) -> None:
         self.rejected += 1
         if log.isEnabledFor(logging.DEBUG):
@@ -513,15 +524,7 @@ class MMBinaryParser(_BinaryParser):
         y = run[3] | (run[4] << 7)
         if not b0 & 0x08:
             y = -y
-        button = b0 & 0x07
-        if not (self._xlo <= x <= self._xhi and self._ylo <= y <= self._yhi):
-            self._reject(run, f"position {x}, {y} outside the active area")
-            return None
-        if button > self._maxb:
-            self._reject(run, f"button {button} above {self._maxb}")
-            return None
-        self._garbage = False
-        return Report(x, y, button, not b0 & 0x40, run)
+        return self._plausible(x, y, b0 & 0x07, not b0 & 0x40, run)
 
     def encode(self, report: Report) -> bytes:
         return encode_mm(report.x_counts, report.y_counts, report.button, report.proximity)
@@ -565,15 +568,7 @@ class CalCompBinaryParser(_BinaryParser):
             return None
         x = ((b0 & 0x03) << 14) | (run[1] << 7) | run[2]
         y = ((b3 & 0x03) << 14) | (run[4] << 7) | run[5]
-        button = (b0 >> 2) & 0x1F
-        if not (self._xlo <= x <= self._xhi and self._ylo <= y <= self._yhi):
-            self._reject(run, f"position {x}, {y} outside the active area")
-            return None
-        if button > self._maxb:
-            self._reject(run, f"button {button} above {self._maxb}")
-            return None
-        self._garbage = False
-        return Report(x, y, button, not b3 & 0x40, run)
+        return self._plausible(x, y, (b0 >> 2) & 0x1F, not b3 & 0x40, run)
 
     def encode(self, report: Report) -> bytes:
         return encode_calcomp(report.x_counts, report.y_counts, report.button, report.proximity)
