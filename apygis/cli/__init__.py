@@ -17,8 +17,6 @@ from importlib.metadata import entry_points
 
 import click
 
-from apygis.cli._common import run_guarded
-
 __all__ = ["main"]
 
 log = logging.getLogger(__name__)
@@ -69,7 +67,3 @@ def main(verbose: int, quiet: int) -> None:
         level=max(logging.DEBUG, min(logging.CRITICAL, level)),
         format="%(levelname)s %(name)s: %(message)s",
     )
-
-
-# Re-exported so that plug-in commands can share the error handling.
-main.run_guarded = run_guarded

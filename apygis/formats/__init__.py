@@ -35,9 +35,18 @@ log = logging.getLogger(__name__)
 
 DRIVER_GROUP = "apygis.drivers"
 
+# The built-in drivers, as pyproject.toml registers them; loaded directly only
+# when apygis runs from a source tree that was never installed.
 _BUILTIN = {
     "apy": "apygis.formats.apy:DRIVER",
     "ascii": "apygis.formats.ascii:DRIVER",
+    "dxf": "apygis.formats.dxf:DRIVER",
+    "generate": "apygis.formats.arcinfo:DRIVER",
+    "e00": "apygis.formats.e00:DRIVER",
+    "gpkg": "apygis.formats.ogr:GPKG",
+    "shp": "apygis.formats.ogr:SHP",
+    "geojson": "apygis.formats.ogr:GEOJSON",
+    "fgb": "apygis.formats.ogr:FGB",
 }
 
 

@@ -47,3 +47,13 @@ def test_unknown_names_and_files(tmp_path):
     m.layer("r")
     with pytest.raises(DriverError, match=r"\.xlsx is neither"):
         apygis.write(m, tmp_path / "m.xlsx")
+
+
+def test_source_tree_fallback_matches_the_registered_drivers():
+    import tomllib
+
+    from apygis.formats import _BUILTIN
+    from tests.conftest import ROOT
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert project["entry-points"]["apygis.drivers"] == _BUILTIN
