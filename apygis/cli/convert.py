@@ -79,7 +79,12 @@ def convert(paths, to_format, driver, src_driver, to_crs, layer_map, snap, jobs,
     # the writer (shp, geojson, fgb and apy write into folders themselves)
     batch = to_format is not None or len(sources) > 1 or (Path(dst).is_dir() and not driver)
     if not batch:
-        res = convert_file(sources[0], dst, driver=driver, **common)
+        with progress_bar(1000, f"converting {sources[0]}") as bar:
+
+            def advance(fraction):
+                bar.update(round(1000 * fraction) - bar.pos)
+
+            res = convert_file(sources[0], dst, driver=driver, progress=advance, **common)
         if not res.ok:
             raise click.ClickException(res.error)
         click.echo(

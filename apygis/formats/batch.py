@@ -92,14 +92,25 @@ def convert_file(
     overwrite: bool = False,
     to_crs=None,
     read_options: dict | None = None,
+    progress: Callable[[float], None] | None = None,
 ) -> Result:
-    """Convert one file; errors a user can cause come back in ``Result.error``."""
+    """Convert one file; errors a user can cause come back in ``Result.error``.
+
+    ``progress(fraction)`` is called with the part done, 0 to 1: reading is
+    the first half, writing the second (for drivers that report progress).
+    """
     import apygis
     from apygis.formats import driver_for, get_driver
 
+    def phase(offset):
+        if progress is None:
+            return {}
+        return {"progress": lambda done, total: progress(offset + 0.5 * done / max(total, 1))}
+
     try:
         in_drv = get_driver(src_driver, "r") if src_driver else driver_for(src, "r")
-        m = in_drv.reader(os.fspath(src), **_accepted(in_drv.reader, read_options or {}))
+        opts = {**(read_options or {}), **phase(0.0)}
+        m = in_drv.reader(os.fspath(src), **_accepted(in_drv.reader, opts))
         if to_crs is not None:
             from apygis.model.transform import reproject
 
@@ -119,7 +130,9 @@ def convert_file(
                 )
                 verb = "exists" if len(existing) == 1 else "exist"
                 raise FileOverwriteError(f"{what} {verb}; use --overwrite")
-        written = apygis.write(m, dst, driver=out_drv.name)
+        written = apygis.write(m, dst, driver=out_drv.name, **_accepted(out_drv.writer, phase(0.5)))
+        if progress is not None:
+            progress(1.0)
         return Result(src, [str(p) for p in written], sum(len(lay) for lay in m), len(m.layers))
     except ApygisError as exc:
         return Result(src, error=str(exc))

@@ -90,3 +90,15 @@ def test_one_source_into_a_folder_with_a_folder_driver(sample_dir, tmp_path):
     res = _run("convert", sample_dir / "ZH1091", out, "--driver", "geojson")
     assert res.exit_code == 1
     assert "more files exist; use --overwrite" in res.output
+
+
+def test_single_conversion_reports_progress(sample_dir, tmp_path):
+    from apygis.formats.batch import convert_file
+
+    seen = []
+    res = convert_file(str(sample_dir / "ZH1091"), str(tmp_path / "x.gpkg"), progress=seen.append)
+    assert res.ok
+    assert len(seen) > 4
+    assert seen == sorted(seen)
+    assert seen[0] > 0
+    assert seen[-1] == 1.0
