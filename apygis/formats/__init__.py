@@ -23,7 +23,7 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 
@@ -80,7 +80,6 @@ class Driver:
     writer: Callable | None = None
     probe: Callable | None = None
     outputs: Callable | None = None
-    options: dict = field(default_factory=dict)
 
     @property
     def modes(self) -> str:

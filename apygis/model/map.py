@@ -357,8 +357,8 @@ class Layer:
         i = self._line_row(num)
         nums = lp["num"]
         b, f = int(lp["back"][i]), int(lp["fwd"][i])
-        bi = topology._row_or_none(nums, b)
-        fi = topology._row_or_none(nums, f)
+        bi = topology.row_of(nums, b)
+        fi = topology.row_of(nums, f)
         mutual_b = bi is not None and lp["fwd"][bi] == num
         mutual_f = fi is not None and lp["back"][fi] == num
         if mutual_b and mutual_f and bi != fi:

@@ -46,6 +46,7 @@ __all__ = [
     "lookup",
     "margin_mask",
     "mutual_links",
+    "row_of",
     "validate_line_points",
     "validate_numbers",
 ]
@@ -406,7 +407,8 @@ class Closure:
         )
 
 
-def _row_or_none(nums: np.ndarray, num: int) -> int | None:
+def row_of(nums: np.ndarray, num: int) -> int | None:
+    """The first row holding point number ``num``, or None (also for ``NO_REF``)."""
     if num == NO_REF:
         return None
     rows = np.flatnonzero(nums == num)
@@ -489,7 +491,7 @@ def area(lp: np.ndarray, first: int, second: int) -> AreaResult:
     cur = j
     while True:
         nxt_num = lp[step][cur]
-        k = _row_or_none(nums, nxt_num)
+        k = row_of(nums, nxt_num)
         if k is not None and k == i:
             break
         if k is None or lp[other][k] != nums[cur] or k in seen:
@@ -497,7 +499,7 @@ def area(lp: np.ndarray, first: int, second: int) -> AreaResult:
             back_rows = [i]
             c = i
             while True:
-                m = _row_or_none(nums, lp[other][c])
+                m = row_of(nums, lp[other][c])
                 if m is None or lp[step][m] != nums[c] or m in seen or m in back_rows:
                     break
                 back_rows.append(m)
