@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from apygis.errors import DegenerateGeometryError, MeasurementError, OrientationError
+from apygis.orient._fields import finite_fields
 from apygis.orient._lsq import gauss_newton
 from apygis.orient.rotation import angles_from_matrix, rotation_derivatives, rotation_matrix
 
@@ -62,15 +63,10 @@ class Similarity3D:
     kappa_rad: float
 
     def __post_init__(self):
-        for name in SIMILARITY_PARAMETERS:
-            key = name if name in ("tx", "ty", "tz", "scale") else name + "_rad"
-            try:
-                v = float(getattr(self, key))
-            except (TypeError, ValueError):
-                raise OrientationError(f"similarity {key} must be a number") from None
-            if not math.isfinite(v):
-                raise OrientationError(f"similarity {key} must be finite")
-            object.__setattr__(self, key, v)
+        keys = [
+            n if n in ("tx", "ty", "tz", "scale") else n + "_rad" for n in SIMILARITY_PARAMETERS
+        ]
+        finite_fields(self, keys, prefix="similarity ")
         if self.scale <= 0:
             raise OrientationError("similarity scale must be positive")
 

@@ -51,12 +51,12 @@ array([[1100., 2000.,  500.]])
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from apygis.errors import DegenerateGeometryError, OrientationError
+from apygis.orient._fields import finite_fields
 from apygis.orient.rotation import rotation_derivatives, rotation_matrix
 
 __all__ = [
@@ -95,15 +95,7 @@ class InteriorOrientation:
     scanned: bool = False
 
     def __post_init__(self):
-        for name in ("focal_mm", "x0_mm", "y0_mm"):
-            value = getattr(self, name)
-            try:
-                value = float(value)
-            except (TypeError, ValueError):
-                raise OrientationError(f"{name} must be a number, got {value!r}") from None
-            if not math.isfinite(value):
-                raise OrientationError(f"{name} must be finite, got {value!r}")
-            object.__setattr__(self, name, value)
+        finite_fields(self, ("focal_mm", "x0_mm", "y0_mm"), show_value=True)
         if self.focal_mm <= 0:
             raise OrientationError(f"focal_mm must be positive, got {self.focal_mm}")
         object.__setattr__(self, "scanned", bool(self.scanned))
@@ -144,15 +136,8 @@ class ExteriorOrientation:
     rotation: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
-        for name in ("Xo", "Yo", "Zo", "omega_rad", "phi_rad", "kappa_rad"):
-            value = getattr(self, name)
-            try:
-                value = float(value)
-            except (TypeError, ValueError):
-                raise OrientationError(f"{name} must be a number, got {value!r}") from None
-            if not math.isfinite(value):
-                raise OrientationError(f"{name} must be finite, got {value!r}")
-            object.__setattr__(self, name, value)
+        names = ("Xo", "Yo", "Zo", "omega_rad", "phi_rad", "kappa_rad")
+        finite_fields(self, names, show_value=True)
         R = rotation_matrix(self.omega_rad, self.phi_rad, self.kappa_rad)
         R.setflags(write=False)
         object.__setattr__(self, "rotation", R)

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from apygis.errors import DegenerateGeometryError, OrientationError
+from apygis.orient._fields import finite_fields
 
 __all__ = ["HeightCorrection", "HeightCorrectionFit", "fit_height_correction"]
 
@@ -62,14 +63,8 @@ class HeightCorrection:
     scale_m: float = 1.0
 
     def __post_init__(self):
-        for name in ("A", "B", "C", "D", "Xc", "Yc", "scale_m"):
-            try:
-                v = float(getattr(self, name))
-            except (TypeError, ValueError):
-                raise OrientationError(f"height correction {name} must be a number") from None
-            if not math.isfinite(v):
-                raise OrientationError(f"height correction {name} must be finite")
-            object.__setattr__(self, name, v)
+        names = ("A", "B", "C", "D", "Xc", "Yc", "scale_m")
+        finite_fields(self, names, prefix="height correction ")
         if self.scale_m <= 0:
             raise OrientationError("height correction scale_m must be positive")
 

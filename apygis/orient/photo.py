@@ -56,6 +56,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from apygis.errors import DegenerateGeometryError, MeasurementError, OrientationError
+from apygis.orient._fields import finite_fields
 from apygis.orient._lsq import gauss_newton
 from apygis.orient.collinearity import (
     ExteriorOrientation,
@@ -112,14 +113,7 @@ class PhotoOrientation:
 
     def __post_init__(self):
         object.__setattr__(self, "photo_id", str(self.photo_id))
-        for name in ("sx_mm_per_m", "sy_mm_per_m"):
-            try:
-                v = float(getattr(self, name))
-            except (TypeError, ValueError):
-                raise OrientationError(f"photo {self.photo_id}: {name} must be a number") from None
-            if not math.isfinite(v):
-                raise OrientationError(f"photo {self.photo_id}: {name} must be finite")
-            object.__setattr__(self, name, v)
+        finite_fields(self, ("sx_mm_per_m", "sy_mm_per_m"), prefix=f"photo {self.photo_id}: ")
 
     @property
     def parameters(self) -> np.ndarray:

@@ -83,6 +83,7 @@ from typing import NamedTuple
 import numpy as np
 
 from apygis.errors import DegenerateGeometryError, OrientationError
+from apygis.orient._fields import finite_fields
 from apygis.orient.photo import PhotoOrientation
 
 __all__ = [
@@ -197,14 +198,8 @@ class MotorCalibration:
 
     def __post_init__(self):
         object.__setattr__(self, "photo_id", str(self.photo_id))
-        for name in ("step_um", "plate_rotation_rad", "scale_ratio"):
-            try:
-                v = float(getattr(self, name))
-            except (TypeError, ValueError):
-                raise OrientationError(f"motor calibration {name} must be a number") from None
-            if not math.isfinite(v):
-                raise OrientationError(f"motor calibration {name} must be finite")
-            object.__setattr__(self, name, v)
+        names = ("step_um", "plate_rotation_rad", "scale_ratio")
+        finite_fields(self, names, prefix="motor calibration ")
         for name in ("zero_x_steps", "zero_y_steps"):
             v = getattr(self, name)
             if isinstance(v, float) and not v.is_integer():

@@ -52,6 +52,7 @@ from apygis.errors import (
     MeasurementError,
     OrientationError,
 )
+from apygis.orient._fields import finite_fields
 
 __all__ = [
     "MODELS",
@@ -80,17 +81,8 @@ class _Transform:
     model: str = ""
 
     def __post_init__(self):
-        for f in fields(self):
-            v = getattr(self, f.name)
-            try:
-                v = float(v)
-            except (TypeError, ValueError):
-                raise OrientationError(
-                    f"{self.model} coefficient {f.name} must be a number"
-                ) from None
-            if not math.isfinite(v):
-                raise OrientationError(f"{self.model} coefficient {f.name} must be finite")
-            object.__setattr__(self, f.name, v)
+        names = [f.name for f in fields(self)]
+        finite_fields(self, names, prefix=f"{self.model} coefficient ")
 
     def __call__(self, points):
         return self.forward(points)
