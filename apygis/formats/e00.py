@@ -339,12 +339,9 @@ def _layer_arcs(layer: Layer, arcs: _Arcs) -> None:
     if len(lp) == 0:
         return
     ls = export_lines(layer)
-    cs = topology.chains(lp)
-    k = len(cs)
-    first_rows = cs.order[cs.offsets[:-1]]
+    k = len(ls)
     pl_start = ls.offsets[:-1]
     pl_len = np.diff(ls.offsets)
-    has_pre = (pl_len > cs.lengths()) & (ls.nums[pl_start] != lp["num"][first_rows])
     # arc vertices: the polyline, a ring closed explicitly, a lone vertex doubled
     extra = (ls.closed | (pl_len == 1)).astype(np.int64)
     arc_len = pl_len + extra
@@ -357,11 +354,12 @@ def _layer_arcs(layer: Layer, arcs: _Arcs) -> None:
     arcs.layer += [layer.ext] * k
     arcs.code.append(ls.codes.astype(np.int64))
     arcs.closed.append(ls.closed.astype(np.int64))
-    # every line point: its arc and vertex (1-based)
-    chain = cs.chain_of_row()
-    rank = np.empty(len(lp), np.int64)
-    rank[cs.order] = np.arange(len(lp)) - cs.offsets[chain[cs.order]]
-    vertex = has_pre[chain] + rank
+    # every line point: its arc and vertex (0-based here), from its own polyline vertex
+    line = ls.line_index()
+    chain = np.empty(len(lp), np.int64)
+    vertex = np.empty(len(lp), np.int64)
+    chain[ls.rows[ls.own]] = line[ls.own]
+    vertex[ls.rows[ls.own]] = (np.arange(len(ls.rows)) - pl_start[line])[ls.own]
     if not np.array_equal(ls.nums[pl_start[chain] + vertex], lp["num"]):
         raise RuntimeError("E00 writer: line points do not match their arcs")  # pragma: no cover
     arcs.lpt.append(
