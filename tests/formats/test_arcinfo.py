@@ -175,6 +175,7 @@ def feature_coords(layer):
 # --------------------------------------------------------------------------- GDAL's sample files
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("name", sorted(GDAL_GEN))
 def test_gdal_sample_files_read_as_gdal_reads_them(name):
     gtype, expected = GDAL_GEN[name]
@@ -207,6 +208,7 @@ def test_gdal_sample_files_read_as_gdal_reads_them(name):
     assert got == [[tuple(float(v) for v in c) for c in w] for w in want]
 
 
+@pytest.mark.external
 def test_gdal_sample_files_rebuild_topology():
     m = apygis.read(GDAL_DIR / "polygons.gen")
     lay = m.layers["a"]
@@ -388,6 +390,7 @@ def test_outputs_and_stale_files(sample_map, tmp_path):
     assert apygis.read(target).layers["c"].counts()["texts"] == 0
 
 
+@pytest.mark.external
 def test_driver_choice(sample_map, tmp_path):
     target = tmp_path / "ZH1091.gen"
     assert driver_for(target, "w").name == "generate"

@@ -49,6 +49,7 @@ def drawn_lines(layer):
 # --------------------------------------------------------------------------- GDAL's samples
 
 
+@pytest.mark.external
 def test_reference_file_layers_as_gdal():
     path = GDAL_DIR / "test.e00"
     assert pyogrio.list_layers(path).tolist() == [["ARC", "LineString"], ["LAB", "Point"]]
@@ -67,6 +68,7 @@ def test_reference_file_layers_as_gdal():
     np.testing.assert_array_equal(xy[: off[1]].astype(np.float32), first)
 
 
+@pytest.mark.external
 def test_reference_file_imports_with_gdal_geometry():
     path = GDAL_DIR / "test.e00"
     m = apygis.read(path)
@@ -84,12 +86,14 @@ def test_reference_file_imports_with_gdal_geometry():
     assert lay.symbols["num"].tolist() == fields["ValueId"].tolist()
 
 
+@pytest.mark.external
 def test_grid_e00_is_refused():
     with pytest.raises(FormatError, match="grid") as exc:
         apygis.read(GDAL_DIR / "fake_e00grid.e00")
     assert exc.value.record == "line 2"
 
 
+@pytest.mark.external
 def test_compressed_file(tmp_path):
     path = GDAL_DIR / "compressed.e00"
     with pytest.raises(pyogrio.errors.DataSourceError, match="compressed"):
@@ -254,6 +258,7 @@ def test_empty_map(tmp_path):
     assert apygis.read(tmp_path / "E.e00") == m  # (GDAL opens no coverage without features)
 
 
+@pytest.mark.external
 def test_driver_choice(tmp_path):
     assert driver_for(tmp_path / "x.e00", "w").name == "e00"
     assert driver_for(GDAL_DIR / "test.e00", "r").name == "e00"
