@@ -100,6 +100,12 @@ def check_text(text) -> str:
     return text
 
 
+def _linked(lp: np.ndarray, i: int, j: int) -> bool:
+    """Whether line-point rows ``i`` and ``j`` reference each other by any reference."""
+    ni, nj = lp["num"][i], lp["num"][j]
+    return any(lp[f][i] == nj or lp[f][j] == ni for f in REF_FIELDS)
+
+
 def _allocate(used: np.ndarray, count: int) -> np.ndarray:
     """``count`` new point numbers by the rule in this module's docstring."""
     start = int(used.max()) + 1 if len(used) else 1
@@ -286,17 +292,33 @@ class Layer:
     def join(self, num: int, target: int) -> str:
         """Join the line end ``num`` to the existing line point ``target``.
 
-        * If ``target`` is the other end of the same open line, the line is
-          closed (forward/backward references): returns ``"closed"``.
-        * Otherwise ``num`` becomes a branch of ``target``: its free forward
-          or backward reference points to ``target``, and ``target`` takes
+        * If ``target`` is the other end of the same open line (3 points at
+          least), the line is closed by forward/backward references: returns
+          ``"closed"``.
+        * Otherwise ``num`` becomes a branch of ``target``: its free backward
+          (else forward) reference points to ``target``, and ``target`` takes
           ``num`` on a free side reference: returns ``"branch"``.
+
+        A line whose first point is itself a branch (its backward reference
+        goes to a junction; likewise a last point whose forward reference
+        does) cannot be closed there: that reference slot is taken, and a
+        point has only one. Joining the other end to it then makes a branch
+        as above (a loop hanging on its own first point, drawn the same but
+        not a closed line for AREA), and returns ``"branch"``.
+
+        Raises
+        ------
+        TopologyError
+            ``num`` is not a line end (it has a forward and a backward
+            reference), the two points already reference each other, they
+            are the same point, or ``target`` has no free side reference.
+            The layer is unchanged.
         """
         lp = self._tables["line_points"].rows()
         i, j = self._line_row(num), self._line_row(target)
         if i == j:
             raise TopologyError(f"layer {self.ext}: cannot join line point {num} to itself")
-        if num in (lp["side1"][j], lp["side2"][j]) or target in (lp["fwd"][i], lp["back"][i]):
+        if _linked(lp, i, j):
             raise TopologyError(
                 f"layer {self.ext}: line points {num} and {target} are already joined"
             )
@@ -307,18 +329,23 @@ class Layer:
                 "forward and a backward reference)"
             )
         clo = topology.closure(lp, num)
-        if not clo.closed and len(clo.points) >= 3 and target in (clo.start, clo.end):
-            if num == clo.end and target == clo.start:
-                lp["fwd"][i], lp["back"][j] = target, num
+        closing = not clo.closed and len(clo.points) >= 3 and {num, target} == {clo.start, clo.end}
+        if closing:
+            ahead, behind = ("fwd", "back") if num == clo.end else ("back", "fwd")
+            if lp[ahead][i] == NO_REF and lp[behind][j] == NO_REF:
+                lp[ahead][i], lp[behind][j] = target, num
                 return "closed"
-            if num == clo.start and target == clo.end:
-                lp["back"][i], lp["fwd"][j] = target, num
-                return "closed"
+            # target's slot holds its own branch reference: join as a branch instead
         side = next((s for s in ("side1", "side2") if lp[s][j] == NO_REF), None)
         if side is None:
+            why = (
+                f" (the line cannot be closed there: point {target} is itself a branch end)"
+                if closing
+                else ""
+            )
             raise TopologyError(
                 f"layer {self.ext}: line point {target} already has two branches "
-                "(both side references are used)"
+                f"(both side references are used){why}"
             )
         ref = "back" if "back" in free else "fwd"
         lp[ref][i] = target
@@ -347,9 +374,12 @@ class Layer:
         """Delete a line point and repair the references to it.
 
         Its backward and forward neighbours are linked to each other (a line
-        loses the point, not its continuity; a ring of three becomes an open
-        line of two). Branches hanging on the point move to the neighbour that
-        took its place (backward first) if that has a free side reference;
+        loses the point, not its continuity), unless they already reference
+        each other otherwise: a ring of three becomes an open line of two, and
+        a loop hanging on its own point (a branch end joined to a point of its
+        own line) keeps the link it has. Branches hanging on the point move to
+        the neighbour that took its place (backward first) if that has a free
+        side reference and does not already reference the branch end;
         otherwise their end becomes a free line end.
         """
         t = self._tables["line_points"]
@@ -361,21 +391,15 @@ class Layer:
         fi = topology.row_of(nums, f)
         mutual_b = bi is not None and lp["fwd"][bi] == num
         mutual_f = fi is not None and lp["back"][fi] == num
-        if mutual_b and mutual_f and bi != fi:
-            ring_of_three = lp["fwd"][fi] == b and lp["back"][bi] == f
-            if ring_of_three:  # the two points left keep their link: an open line
-                lp["fwd"][bi] = NO_REF
-                lp["back"][fi] = NO_REF
-            else:
-                lp["fwd"][bi] = f
-                lp["back"][fi] = b
-        else:
-            if mutual_b:
-                lp["fwd"][bi] = NO_REF
-            if mutual_f:
-                lp["back"][fi] = NO_REF
-            if bi is not None and bi == fi:  # two-point ring
-                lp["fwd"][bi] = lp["back"][bi] = NO_REF
+        if mutual_b:
+            lp["fwd"][bi] = NO_REF
+        if mutual_f:
+            lp["back"][fi] = NO_REF
+        if bi is not None and bi == fi:  # two-point ring
+            lp["fwd"][bi] = lp["back"][bi] = NO_REF
+        elif mutual_b and mutual_f and not _linked(lp, bi, fi):
+            lp["fwd"][bi] = f
+            lp["back"][fi] = b
         heir = bi if mutual_b else (fi if mutual_f else None)
         # Every other reference to the deleted point: branches and side links.
         for ref in REF_FIELDS:
@@ -383,6 +407,8 @@ class Layer:
             for k in hit:
                 lp[ref][k] = NO_REF
                 if ref in ("fwd", "back") and heir is not None and heir != k:
+                    if _linked(lp, heir, k):
+                        continue
                     side = next((s for s in ("side1", "side2") if lp[s][heir] == NO_REF), None)
                     if side is not None:
                         lp[ref][k] = nums[heir]

@@ -207,3 +207,98 @@ def test_map_equality_and_copy():
     assert c == m
     c.layer("r").add_symbol(0, 0, 0, 1)
     assert c != m
+
+
+def _ref_table(layer):
+    lp = layer.line_points
+    return {
+        int(r["num"]): (int(r["fwd"]), int(r["back"]), int(r["side1"]), int(r["side2"])) for r in lp
+    }
+
+
+def test_join_to_a_first_point_that_is_a_branch_end_makes_a_branch():
+    # Issue 9: an operator starts a branch at junction a[0] (SEARCH), digitises two points
+    # and SEARCHes the branch's first point: closing the ring there overwrote its backward
+    # reference to the junction. The slot is taken, so the line hangs on its own first point.
+    lay = apygis.MapFile("T").layer("r")
+    a = lay.add_line([(0, 0, 0), (10, 0, 0)], code=1)
+    (b,) = lay.add_line([(5, 5, 0)], code=1)
+    assert lay.join(b, a[0]) == "branch"
+    c = lay.extend_line(b, [(6, 9, 0), (2, 9, 0)])
+    assert lay.join(c[-1], b) == "branch"
+    assert lay.validate() == []
+    assert refs(lay, b) == (c[0], a[0], c[-1], NO_REF)
+    assert refs(lay, c[-1])[:2] == (b, c[0])
+    assert {(d["point"], d["junction"]) for d in lay.branches()} == {(b, a[0]), (c[-1], b)}
+    assert not lay.closure(b).closed
+
+
+def test_join_to_a_last_point_that_is_a_branch_end_makes_a_branch():
+    # The mirror case: the line's last point hangs on a junction by its forward reference.
+    lay = apygis.MapFile("T").layer("r")
+    a = lay.add_line([(0, 0, 0), (10, 0, 0)], code=1)
+    n = lay.add_line([(0, 9, 0), (5, 9, 0), (5, 5, 0)], code=1)
+    assert lay.join(n[-1], a[1]) == "branch"
+    assert refs(lay, n[-1])[0] == a[1]
+    assert lay.join(n[0], n[-1]) == "branch"
+    assert refs(lay, n[0])[1] == n[-1]
+    assert refs(lay, n[-1])[2] == n[0]
+    assert lay.validate() == []
+
+
+def test_join_refused_when_the_ring_cannot_close_and_no_side_is_free():
+    lay = apygis.MapFile("T").layer("r")
+    a = lay.add_line([(0, 0, 0), (10, 0, 0)], code=1)
+    n = lay.add_line([(5, 5, 0), (6, 9, 0), (2, 9, 0)], code=1)
+    lay.join(n[0], a[0])
+    for k in range(2):
+        (e,) = lay.add_line([(k, 20, 0)], code=1)
+        lay.join(e, n[0])
+    before = lay.copy()
+    with pytest.raises(TopologyError, match=r"two branches.*cannot be closed"):
+        lay.join(n[-1], n[0])
+    assert lay == before
+
+
+def test_join_refused_when_the_points_already_reference_each_other():
+    # 4 hangs on 2 by its forward reference; joining 2 back to 4 made 2 and 4
+    # reference each other forward (a two-point cycle).
+    lay = apygis.MapFile("T").layer("r")
+    a = lay.add_line([(0, 0, 0), (1, 0, 0)], code=1)
+    b = lay.add_line([(0, 1, 0), (1, 1, 0)], code=1)
+    assert lay.join(b[-1], a[-1]) == "branch"
+    before = lay.copy()
+    with pytest.raises(TopologyError, match="already joined"):
+        lay.join(a[-1], b[-1])
+    assert lay == before
+    assert lay.validate() == []
+
+
+def test_delete_line_point_does_not_hand_a_branch_to_its_own_neighbour():
+    # Issue 9: 5 hangs on 2 (a loop); deleting 1, 2, 3 handed the branch on to 4,
+    # which 5 already follows: 4 and 5 referenced each other forward.
+    lay = apygis.MapFile("T").layer("r")
+    n = lay.add_line([(float(k), 0.0, 0.0) for k in range(5)], code=1)
+    assert lay.join(n[4], n[1]) == "branch"
+    for k in n[:3]:
+        lay.delete_line_point(k)
+        assert lay.validate() == [], k
+    assert _ref_table(lay) == {
+        n[3]: (n[4], NO_REF, NO_REF, NO_REF),
+        n[4]: (NO_REF, n[3], NO_REF, NO_REF),
+    }
+
+
+def test_delete_line_point_in_a_loop_of_three_keeps_the_branch():
+    # 2 -> 3 -> 4, and 4 hangs on 2: deleting 3 bridged 2 -> 4, a two-point forward cycle.
+    lay = apygis.MapFile("T").layer("r")
+    n = lay.add_line([(0, 0, 0), (1, 0, 0), (2, 0, 0), (2, 1, 0)], code=1)
+    assert lay.join(n[3], n[1]) == "branch"
+    lay.delete_line_point(n[2])
+    assert lay.validate() == []
+    assert _ref_table(lay) == {
+        n[0]: (n[1], NO_REF, NO_REF, NO_REF),
+        n[1]: (NO_REF, n[0], n[3], NO_REF),
+        n[3]: (n[1], NO_REF, NO_REF, NO_REF),
+    }
+    assert lay.branches() == [{"chain": 1, "end": "end", "point": n[3], "junction": n[1]}]
