@@ -38,6 +38,27 @@ class _PluginGroup(click.Group):
     def list_commands(self, ctx):
         return sorted(set(self._eps()) | set(self.commands))
 
+    def invoke(self, ctx):
+        """Run the command; whatever escapes it ends in one line on standard error.
+
+        Commands turn an :class:`~apygis.errors.ApygisError` into a one-line
+        message themselves; this is the net for the rest, so that a user never
+        sees a traceback (``-vv`` logs it): an ``OSError`` names the file and the
+        reason with exit code 1, Ctrl-C exits with 130 as shells expect, running
+        out of memory or recursion says so, and anything else is reported as an
+        internal error, exit code 1.
+        """
+        try:
+            return super().invoke(ctx)
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except KeyboardInterrupt:
+            click.echo("apygis: interrupted", err=True)
+            ctx.exit(130)
+        except Exception as exc:
+            log.debug("traceback", exc_info=True)
+            raise click.ClickException(_last_resort_message(exc)) from exc
+
     def get_command(self, ctx, cmd_name):
         if cmd_name in self.commands:
             return self.commands[cmd_name]
@@ -66,4 +87,19 @@ def main(verbose: int, quiet: int) -> None:
     logging.basicConfig(
         level=max(logging.DEBUG, min(logging.CRITICAL, level)),
         format="%(levelname)s %(name)s: %(message)s",
+    )
+
+
+def _last_resort_message(exc: BaseException) -> str:
+    """One line for an exception that no command turned into a message of its own."""
+    if isinstance(exc, OSError):
+        where = f"{exc.filename}: " if exc.filename else ""
+        return f"{where}{exc.strerror or exc}"
+    if isinstance(exc, MemoryError):
+        return "out of memory: the input is too large for this machine"
+    if isinstance(exc, RecursionError):
+        return "the input is nested too deeply to be processed"
+    return (
+        f"internal error ({type(exc).__name__}: {exc}); this is a bug in apygis: "
+        "please report it with the output of the same command run with -vv"
     )
