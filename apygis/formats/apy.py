@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import struct
 import zlib
 from pathlib import Path
@@ -40,7 +39,8 @@ from apygis.formats._apycommon import (
     encode_latin1,
     m_to_cm,
 )
-from apygis.formats._io import atomic_write_many, read_bytes
+from apygis.formats._io import STAMP_SUFFIX, atomic_write_many, check_resolution, read_bytes
+from apygis.formats._readguard import check_coords, loads_json
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, crs_string
 from apygis.model.records import (
     APY_CAPACITY,
@@ -202,10 +202,7 @@ def decode_layer(data: bytes, path=None) -> tuple[dict, Layer]:
     pos = HEADER_SIZE
     meta = {}
     if meta_len:
-        try:
-            meta = json.loads(data[pos : pos + meta_len].decode("utf-8"))
-        except (UnicodeDecodeError, ValueError) as exc:
-            raise FormatError(f"metadata block is not UTF-8 JSON: {exc}", path=path) from None
+        meta = loads_json(data[pos : pos + meta_len], "metadata block", path=path)
         if not isinstance(meta, dict):
             raise FormatError("metadata block is not a JSON object", path=path)
     for key in ("crs", "notes"):
@@ -255,6 +252,9 @@ def decode_layer(data: bytes, path=None) -> tuple[dict, Layer]:
     tx["num"] = t["num"]
     tx["x"], tx["y"], tx["z"] = cm_to_m(t["x"]), cm_to_m(t["y"]), cm_to_m(t["z"])
     tx["text"] = decode_latin1(codes, TEXT_LEN)
+    for table, word in ((sym, "symbol"), (lp, "line point"), (tx, "text")):
+        xyz = np.column_stack([table["x"], table["y"], table["z"]])
+        check_coords(xyz, path, lambda i, w=word: f"{w} record {i + 1}")
     return facts, Layer.from_arrays(facts["ext"], sym, lp, tx)
 
 
@@ -342,6 +342,20 @@ def _split_target(map_: MapFile, path) -> tuple[Path, list[Layer], bool]:
     return p, list(map_.layers.values()), True
 
 
+def _stamp(base: Path) -> Path:
+    return base.with_name(base.name + STAMP_SUFFIX)
+
+
+def members(path) -> tuple[Path, list[Path], bool]:
+    """The set stamp and the layer files a read of ``path`` takes (see :func:`read`)."""
+    p = Path(path)
+    if p.exists():
+        ext = p.suffix[1:]
+        base = p.with_suffix("") if ext and _is_layer_name(ext) else p
+        return _stamp(base), [p], False
+    return _stamp(p), _layer_files(p), True
+
+
 def outputs(map_: MapFile, path) -> list[Path]:
     base, layers, _ = _split_target(map_, path)
     return [base.with_name(f"{base.name}.{lay.ext}") for lay in layers]
@@ -398,18 +412,18 @@ def write(map_: MapFile, path, progress=None) -> list[Path]:
     base, layers, whole = _split_target(map_, path)
     if not layers:
         raise DriverError(f"{path}: map {map_.id} has no layers: nothing to write")
+    check_resolution(map_, path, 0.01, "APY binary stores coordinates in hundredths of a unit")
     contents = {}
     for k, lay in enumerate(layers):
         target = base.with_name(f"{base.name}.{lay.ext}")
         contents[target] = encode_layer(map_, lay, target)
         if progress:
             progress(k + 1, 2 * len(layers))
-    written = atomic_write_many(contents)
-    if whole:  # layer files of layers the map no longer has would be read back as its own
-        for old in _layer_files(base):
-            if old not in contents:
-                log.info("removing %s: map %s has no layer %s", old, map_.id, old.suffix[1:])
-                os.unlink(old)
+    # layer files of layers the map no longer has would be read back as its own
+    stale = [old for old in _layer_files(base) if old not in contents] if whole else []
+    for old in stale:
+        log.info("removing %s: map %s has no layer %s", old, map_.id, old.suffix[1:])
+    written = atomic_write_many(contents, _stamp(base), complete=whole, remove=stale)
     if progress:
         progress(2 * len(layers), 2 * len(layers))
     return written
@@ -423,4 +437,5 @@ DRIVER = Driver(
     writer=write,
     probe=probe,
     outputs=outputs,
+    members=members,
 )

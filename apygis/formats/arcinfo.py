@@ -57,9 +57,16 @@ import numpy as np
 
 from apygis.errors import DriverError, FormatError, RecordError, ValueRangeError
 from apygis.formats import Driver
-from apygis.formats._io import atomic_write_many, read_bytes
+from apygis.formats._io import (
+    STAMP_SUFFIX,
+    atomic_write_many,
+    check_resolution,
+    metres_per_unit,
+    read_bytes,
+)
+from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows
 from apygis.model import topology
-from apygis.model.build import add_lines, export_lines
+from apygis.model.build import add_lines, export_lines, tolerance_in_crs
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text
 from apygis.model.records import MAX_CODE, SYMBOL_DTYPE, TEXT_DTYPE
 
@@ -422,7 +429,33 @@ def set_files(path) -> dict[tuple[str, str], Path]:
     return found
 
 
-def write(map_: MapFile, path, progress=None, dims: int = 3, decimals: int = 3) -> list[Path]:
+def _auto_decimals(map_: MapFile) -> int:
+    """Decimals for millimetres (3 in metres or feet; 9 in degrees: 0.1 mm)."""
+    if map_.crs is None:
+        return 3
+    m = metres_per_unit(map_.crs)
+    return max(3, min(9, math.ceil(-math.log10(0.001 / m) - 1e-9)))
+
+
+def members(path) -> tuple[Path, list[Path], bool] | None:
+    """The set stamp and the files of the set a read of ``path`` takes."""
+    p = Path(path)
+    base = p.with_suffix("") if p.suffix.lower() == ".gen" else p
+    stamp = base.with_name(base.name + STAMP_SUFFIX)
+    if p.is_file():
+        return stamp, [p, *[c for c in [p.with_suffix(".csv")] if c.is_file()]], False
+    files = []
+    for gen in set_files(base).values():
+        files += [gen, *[c for c in [gen.with_suffix(".csv")] if c.is_file()]]
+    prj = base.with_name(base.name + ".prj")
+    if prj.is_file():
+        files.append(prj)
+    return stamp, files, True
+
+
+def write(
+    map_: MapFile, path, progress=None, dims: int = 3, decimals: int | None = None
+) -> list[Path]:
     """Write a map as a set of GENERATE files with CSV attribute tables, atomically.
 
     Parameters
@@ -436,8 +469,10 @@ def write(map_: MapFile, path, progress=None, dims: int = 3, decimals: int = 3) 
     dims : {3, 2}
         Write X, Y, Z (default) or X, Y (heights are then only in the CSV
         tables of points and texts).
-    decimals : int
-        Decimals of coordinates and heights (default 3: millimetres).
+    decimals : int, optional
+        Decimals of coordinates and heights (default: millimetres, 3 in
+        metres or feet, 9 in degrees). Decimals coarser than a centimetre in
+        the map's CRS unit are refused.
 
     Returns
     -------
@@ -446,18 +481,24 @@ def write(map_: MapFile, path, progress=None, dims: int = 3, decimals: int = 3) 
         fills (a layer or table that is now empty) are removed, so that
         reading the set gives this map back.
     """
+    if decimals is None:
+        decimals = _auto_decimals(map_)
     _check_options(dims, decimals)
+    check_resolution(
+        map_, path, 10.0**-decimals, f"GENERATE is written with {decimals} decimals"
+    )
     contents = _contents(map_, path, dims, decimals)
     if progress:
         progress(1, 2)
-    written = atomic_write_many(contents)
     base = _target_base(map_, path)
     stale = [f for old in set_files(base).values() for f in (old, old.with_suffix(".csv"))]
     stale.append(base.with_name(base.name + ".prj"))
+    stale = [f for f in stale if f not in contents and f.is_file()]
     for f in stale:
-        if f not in contents and f.is_file():
-            log.info("removing %s: the map no longer has these records", f)
-            os.unlink(f)
+        log.info("removing %s: the map no longer has these records", f)
+    written = atomic_write_many(
+        contents, base.with_name(base.name + STAMP_SUFFIX), complete=True, remove=stale
+    )
     if progress:
         progress(2, 2)
     return written
@@ -581,10 +622,14 @@ class _Tokens:
                             f"expected numbers ({names}), found {self.text(int(toks[k]))!r}",
                             int(toks[k]),
                         )
-        bad = ~np.isfinite(v)
-        if bad.any():
-            k = int(toks[np.flatnonzero(bad)[0]])
-            self.fail(f"expected finite numbers ({names}), found {self.text(k)!r}", k)
+        bad = bad_coord_rows(v)
+        if len(bad):
+            k = int(toks[bad[0]])
+            self.fail(
+                f"expected finite numbers ({names}) of at most {MAX_COORD:g} in magnitude, "
+                f"found {self.text(k)!r}",
+                k,
+            )
         return v
 
 
@@ -773,16 +818,11 @@ class _Attributes:
         self.need(name)
         col = self.cols[name] if rows is None else self.cols[name][rows]
         rows = np.arange(len(col)) if rows is None else rows
-        try:
-            v = np.array([int(s) for s in col], dtype=np.int64)
-        except (ValueError, OverflowError):
-            v = None
+        ints = [ascii_int(str(s).strip(), signed=True) for s in col]  # no '²', no '1_0'
+        v = None if None in ints else np.array(ints, dtype=np.int64)
         if v is None or (len(v) and ((v < lo) | (v > hi)).any()):
             for j, s in enumerate(col):
-                try:
-                    ok = lo <= int(s) <= hi
-                except ValueError:
-                    ok = False
+                ok = ints[j] is not None and lo <= ints[j] <= hi
                 if not ok:
                     self.fail(f"{name} must be an integer from {lo} to {hi}, not {s!r}", rows[j])
         return v
@@ -794,14 +834,18 @@ class _Attributes:
             v = np.array([float(s) for s in col], dtype=np.float64)
         except ValueError:
             v = None
-        if v is None or not np.isfinite(v).all():
+        if v is None or len(bad_coord_rows(v)):
             for j, s in enumerate(col):
                 try:
-                    ok = math.isfinite(float(s))
+                    ok = abs(float(s)) <= MAX_COORD  # False for NaN
                 except ValueError:
                     ok = False
                 if not ok:
-                    self.fail(f"{name} must be a finite number, not {s!r}", rows[j])
+                    self.fail(
+                        f"{name} must be a finite number of at most {MAX_COORD:g} in "
+                        f"magnitude, not {s[:40]!r}",
+                        rows[j],
+                    )
         return v
 
     def rows_for(self, ids: np.ndarray) -> np.ndarray:
@@ -857,7 +901,9 @@ def _line_codes(d: dict, table, code: int) -> list[int]:
     return codes.tolist()
 
 
-def _add_lines_safely(layer: Layer, lines: list[np.ndarray], codes, closed, tol: float) -> None:
+def _add_lines_safely(
+    layer: Layer, lines: list[np.ndarray], codes, closed, tol: float, crs=None
+) -> None:
     """:func:`add_lines`, falling back to plain lines where joining breaks the topology.
 
     Joining can produce degenerate chains (two lines with the same two end
@@ -866,6 +912,9 @@ def _add_lines_safely(layer: Layer, lines: list[np.ndarray], codes, closed, tol:
     """
     if not lines:
         return
+    if crs is not None:  # tol is metres; the coordinates are in the CRS's units
+        ys = [p[:, 1].mean() for p in lines if len(p)]
+        tol = tolerance_in_crs(tol, crs, float(np.mean(ys)) if ys else 0.0)
     closed = [
         bool(c) or (len(p) >= 4 and bool(np.hypot(*(p[-1, :2] - p[0, :2])) <= tol))
         for p, c in zip(lines, closed, strict=True)
@@ -969,7 +1018,7 @@ def _read_single(p: Path, layer: str | None, tol: float, code: int) -> MapFile:
     if kind in ("lines", "polygons"):
         lines = _lines_of(d)
         codes = _line_codes(d, table, code)
-        _add_lines_safely(lay, lines, codes, [kind == "polygons"] * len(lines), tol)
+        _add_lines_safely(lay, lines, codes, [kind == "polygons"] * len(lines), tol, mp.crs)
     else:
         _points_to_layer(lay, d, kind, table, p, code)
     return mp
@@ -1013,6 +1062,7 @@ def _read_set(p: Path, members: dict, tol: float, code: int, progress) -> MapFil
             [all_codes[k] for k in order],
             [all_closed[k] for k in order],
             tol,
+            mp.crs,
         )
     return mp
 
@@ -1100,4 +1150,5 @@ DRIVER = Driver(
     writer=write,
     probe=probe,
     outputs=outputs,
+    members=members,
 )

@@ -31,7 +31,8 @@ import numpy as np
 from apygis.errors import FormatError
 from apygis.formats import Driver
 from apygis.formats._apycommon import check_layer_for_apy, cm_to_m, m_to_cm
-from apygis.formats._io import atomic_write_many, read_bytes
+from apygis.formats._io import atomic_write_many, check_resolution, read_bytes
+from apygis.formats._readguard import ascii_int, check_coords
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
 from apygis.model.records import LINE_DTYPE, NO_REF, REF_FIELDS, SYMBOL_DTYPE, TEXT_DTYPE
 
@@ -170,8 +171,25 @@ class _Reader:
         except UnicodeDecodeError as exc:
             self.fail(f"not UTF-8 ({exc.reason} at byte {exc.start})")
 
+    def check_room(self, n: int, width: int, what: str) -> None:
+        """Refuse a row count that the rest of the file cannot hold, before allocating.
+
+        The first row that is missing or wrong is named when there is one
+        (a walk over the lines that are there, so bounded by the file).
+        """
+        room = (len(self.data) - self.pos) // (width + len(self.eol))
+        if n > room:
+            save = self.pos, self.line_no
+            self._explain_block(n, width, what)  # raises on a short or bad row
+            self.pos, self.line_no = save  # pragma: no cover - the rows were all there
+            self.fail(
+                f"the {what} table announces {n} rows, but the rest of the file has room "
+                f"for at most {room}"
+            )  # pragma: no cover
+
     def block(self, n: int, width: int, what: str) -> np.ndarray:
         """``n`` fixed-width rows as an (n, width) uint8 matrix."""
+        self.check_room(n, width, what)
         el = len(self.eol)
         size = n * (width + el)
         chunk = self.data[self.pos : self.pos + size]
@@ -300,6 +318,11 @@ def _parse_table(rd, m, cols, width, dtype):
         else:
             v = _get_int(rd, m, col, w, name)
             out[name] = v
+    check_coords(
+        np.column_stack([out["x"], out["y"], out["z"]]),
+        rd.path,
+        lambda i: f"line {rd.block_start + i}",
+    )
     return out
 
 
@@ -327,9 +350,13 @@ def decode(data: bytes, path=None) -> MapFile:
             if word == "MAP":
                 header["id"] = rest
             elif word == "SCALE":
-                if not rest.isdigit() or int(rest) < 1:
-                    rd.fail(f"SCALE must be a positive integer denominator, not {rest!r}")
-                header["scale"] = int(rest)
+                scale = ascii_int(rest)
+                if scale is None or scale < 1:
+                    rd.fail(
+                        "SCALE must be a positive integer denominator (digits 0-9), "
+                        f"not {rest[:40]!r}"
+                    )
+                header["scale"] = scale
             elif word == "CRS":
                 header["crs"] = rest
             else:
@@ -352,9 +379,9 @@ def decode(data: bytes, path=None) -> MapFile:
                 rd.fail(f"{word} before the first LAYER line")
             if word in layer_parts:
                 rd.fail(f"a second {word} table in layer {layer_ext}")
-            if not rest.isdigit():
-                rd.fail(f"{word} must be followed by the number of rows, not {rest!r}")
-            n = int(rest)
+            n = ascii_int(rest)
+            if n is None:
+                rd.fail(f"{word} must be followed by a row count (digits 0-9), not {rest[:40]!r}")
             if word == "SYMBOLS":
                 mat = rd.block(n, SYMBOL_WIDTH, "symbol")
                 layer_parts[word] = _parse_table(rd, mat, SYMBOL_COLS, SYMBOL_WIDTH, SYMBOL_DTYPE)
@@ -392,8 +419,9 @@ def _make_map(rd: _Reader, header: dict) -> MapFile:
 
 
 def _read_texts(rd: _Reader, n: int) -> np.ndarray:
-    out = np.zeros(n, TEXT_DTYPE)
-    for i in range(n):
+    # rows are collected, not preallocated: a count of 10**12 ends at the end of the file
+    rows = []
+    for _ in range(n):
         line = rd.next_line()
         if line is None:
             rd.fail(f"the file ends inside the text table (expected {n} rows)")
@@ -407,8 +435,8 @@ def _read_texts(rd: _Reader, n: int) -> np.ndarray:
             text = check_text(line[TEXT_COL:])
         except ValueError as exc:
             rd.fail(str(exc))
-        out[i] = (row["num"], row["x"], row["y"], row["z"], text)
-    return out
+        rows.append((row["num"], row["x"], row["y"], row["z"], text))
+    return np.array(rows, dtype=TEXT_DTYPE) if rows else np.zeros(0, TEXT_DTYPE)
 
 
 # --------------------------------------------------------------------------- API
@@ -432,7 +460,12 @@ def read(path, progress=None) -> MapFile:
 
 
 def write(map_: MapFile, path, progress=None) -> list:
-    """Write a map as APY ASCII, atomically."""
+    """Write a map as APY ASCII, atomically.
+
+    A map whose CRS unit makes centimetres of a unit coarser than 1 cm (degrees)
+    is refused: the format stores hundredths of a unit.
+    """
+    check_resolution(map_, path, 0.01, "APY ASCII stores coordinates in hundredths of a unit")
     from pathlib import Path
 
     out = atomic_write_many({Path(path): encode(map_, path)})

@@ -69,6 +69,7 @@ import numpy as np
 from apygis.errors import ApygisError, DriverError, FormatError, ValueRangeError
 from apygis.formats import Driver
 from apygis.formats._io import atomic_write_many, read_bytes
+from apygis.formats._readguard import MAX_COORD, ascii_int, check_str, loads_json
 from apygis.model.build import export_lines
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, crs_string
 from apygis.model.records import (
@@ -116,7 +117,7 @@ DXF_VERSIONS = {"R2010": "AC1024", "R2013": "AC1027", "R2018": "AC1032"}
 _GRID = 15
 _CHUNK = 250  # characters per string tag of the header record
 _BINARY_SENTINEL = b"AutoCAD Binary DXF\r\n\x1a\x00"
-_BLOCK_RE = re.compile(rf"^{BLOCK_PREFIX}(\d\d)$", re.IGNORECASE)
+_BLOCK_RE = re.compile(rf"^{BLOCK_PREFIX}([0-9][0-9])$", re.IGNORECASE)
 _EXT_LIKE = re.compile(r"^[A-Za-z]{1,3}$")
 _CTRL = re.compile("[\x00-\x1f\x7f-\x9f]")
 _ENTITIES_START = "\n  2\nENTITIES\n"
@@ -336,13 +337,65 @@ def _header_tags(map_: MapFile, entities: bytes) -> list[tuple[int, str]]:
     return tags
 
 
-def _skeleton(map_: MapFile, library, dxfversion: str, cell_m: float, text_m: float):
+# $INSUNITS codes of the linear units a CRS can have (DXF has none for degrees)
+_INSUNITS = {
+    "metre": 6,
+    "foot": 2,
+    "US survey foot": 21,
+    "kilometre": 7,
+    "centimetre": 5,
+    "millimetre": 4,
+    "inch": 1,
+    "yard": 10,
+    "mile": 3,
+}
+_IMPERIAL = {"foot", "US survey foot", "inch", "yard", "mile"}
+
+
+def drawing_units(map_: MapFile) -> tuple[int, int, float]:
+    """``($INSUNITS, $MEASUREMENT, metres per drawing unit)`` for the map's CRS.
+
+    The drawing is in the CRS's units: metres (6) without a CRS or in a
+    metric CRS, feet (2) or US survey feet (21) in a CRS in feet; a
+    geographic CRS draws in degrees, which DXF cannot name: ``$INSUNITS`` 0
+    (unitless), and a drawing unit is a degree of latitude at the data's mean
+    latitude (sizes of texts and symbols are converted with it).
+
+    >>> drawing_units(MapFile("A", crs="EPSG:2056"))
+    (6, 1, 1.0)
+    >>> drawing_units(MapFile("A", crs="EPSG:2229"))[:2]
+    (21, 0)
+    """
+    from apygis.model.build import metres_per_unit_at
+
+    if map_.crs is None:
+        return 6, 1, 1.0
+    axes = map_.crs.axis_info
+    name = axes[0].unit_name if axes else "metre"
+    ys = [lay.table(t)["y"] for lay in map_ for t in ("symbols", "line_points", "texts")]
+    ys = [y for y in ys if len(y)]
+    lat = float(np.mean(np.concatenate(ys))) if ys else 0.0
+    _, north = metres_per_unit_at(map_.crs, lat)
+    if map_.crs.is_geographic:
+        return 0, 1, north
+    return _INSUNITS.get(name, 0), 0 if name in _IMPERIAL else 1, north
+
+
+def _skeleton(
+    map_: MapFile,
+    library,
+    dxfversion: str,
+    cell_m: float,
+    text_m: float,
+    insunits: int = 6,
+    measurement: int = 1,
+):
     """The ezdxf document: header, layers, symbol blocks, the header record."""
     import ezdxf
 
     doc = ezdxf.new(dxfversion, setup=False)
-    doc.header["$INSUNITS"] = 6  # metres
-    doc.header["$MEASUREMENT"] = 1
+    doc.header["$INSUNITS"] = insunits  # the CRS's unit (0: degrees, which DXF cannot name)
+    doc.header["$MEASUREMENT"] = measurement
     doc.header["$PROJECTNAME"] = map_.id
     doc.appids.add(APPID)
     for ext in map_.layers:
@@ -505,9 +558,11 @@ def encode(map_: MapFile, library=None, dxfversion: str = "R2010", path=None, pr
     if library is None:
         library = load_library()
     scale = map_.scale or DEFAULT_SCALE
-    cell_m = SYMBOL_SIZE_MM / _GRID * scale / 1000.0
-    text_m = TEXT_HEIGHT_MM * scale / 1000.0
-    doc = _skeleton(map_, library, dxfversion, cell_m, text_m)
+    insunits, measurement, unit_m = drawing_units(map_)
+    # sizes on paper at the map's scale, in the drawing's (the CRS's) units
+    cell_m = SYMBOL_SIZE_MM / _GRID * scale / 1000.0 / unit_m
+    text_m = TEXT_HEIGHT_MM * scale / 1000.0 / unit_m
+    doc = _skeleton(map_, library, dxfversion, cell_m, text_m, insunits, measurement)
     owner = int(doc.modelspace().block_record_handle, 16)
     start = int(str(doc.entitydb.handles), 16)
     h = start
@@ -676,10 +731,7 @@ def _header_from_tags(tags, path) -> dict:
             raise FormatError(f"{APPID} header record: unexpected tag ({code}, {value!r})", path)
     out = {}
     for key, chunks in raw.items():
-        try:
-            out[key] = json.loads("".join(chunks))
-        except (ValueError, RecursionError):
-            raise FormatError(f"{APPID} header record: {key!r} is not JSON", path=path) from None
+        out[key] = loads_json("".join(chunks), f"{APPID} header record: {key!r}", path=path)
     if out.get("format") != FORMAT_NAME:
         raise FormatError(f"{APPID} header record: format is not {FORMAT_NAME!r}", path=path)
     version = out.get("version")
@@ -699,7 +751,12 @@ def _header_from_tags(tags, path) -> dict:
         "layers": (list,),
     }
     for key, types in expect.items():
-        v = out.get(key)
+        if key not in out:
+            raise FormatError(
+                f"{APPID} header record: no {key!r} entry (expected {', '.join(expect)})",
+                path=path,
+            )
+        v = out[key]
         if not isinstance(v, types) or isinstance(v, bool):
             raise FormatError(f"{APPID} header record: bad {key} {v!r}", path=path)
     try:
@@ -759,16 +816,17 @@ def _seed_layers(header: dict | None, names) -> dict[str, _Collect]:
 
 def _xyz(v, what) -> tuple[float, float, float]:
     x, y, z = float(v[0]), float(v[1]), float(v[2])
-    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-        raise FormatError(f"{what}: a coordinate is not finite")
+    if not (abs(x) <= MAX_COORD and abs(y) <= MAX_COORD and abs(z) <= MAX_COORD):
+        raise FormatError(
+            f"{what}: coordinates ({x!r}, {y!r}, {z!r}) are not finite or exceed "
+            f"{MAX_COORD:g} in magnitude"
+        )
     return x, y, z
 
 
 def _int_or_none(s) -> int | None:
-    try:
-        return int(str(s).strip())
-    except ValueError:
-        return None
+    """An optionally signed integer of ASCII digits (no '²', no '1_0'), else None."""
+    return ascii_int(str(s).strip(), signed=True)
 
 
 def _clean_text(s: str, stats: Counter) -> str:
@@ -874,6 +932,7 @@ def _text(e, c: _Collect, stats: Counter, what: str) -> None:
             raise FormatError(f"{what}: bad {APPID} XDATA {xd!r}")
         own = _own_text(xd[0], str(e.dxf.get("text", "")), what)
         if own is not None:
+            check_str(own[1], f"{what}: the text")
             pos = _xyz(e.ocs().to_wcs(e.dxf.insert), what)
             c.txt.append((own[0], *pos, _clean_text(own[1], stats)))
         return
@@ -883,6 +942,7 @@ def _text(e, c: _Collect, stats: Counter, what: str) -> None:
     else:  # MTEXT: its insertion point is in WCS
         text = " ".join(ln.strip() for ln in e.plain_text(split=True) if ln.strip())
         pos = _xyz(e.dxf.insert, what)
+    check_str(text, f"{what}: the text")
     c.txt.append((None, *pos, _clean_text(text, stats)))
 
 
@@ -1050,7 +1110,10 @@ def _fast_entities(text: str, header: dict, names, opts: dict, stats: Counter):
             [np.array(xs, dtype=float), np.array(ys, dtype=float), np.array(zs, dtype=float)]
         )
         vals = np.array(" ".join(ints).split(), dtype=np.int64).reshape(-1, 7)
-        if not np.isfinite(xyz).all() or ((vals[:, 1] < 0) | (vals[:, 1] > MAX_CODE)).any():
+        if (
+            not (np.abs(xyz) <= MAX_COORD).all()
+            or ((vals[:, 1] < 0) | (vals[:, 1] > MAX_CODE)).any()
+        ):
             raise ValueError("non-finite coordinates or line codes outside 0-99")
         # XDATA order: num code fwd back side1 side2 row -> row first, as _Collect.own
         vals = vals[:, [6, 0, 1, 2, 3, 4, 5]]
@@ -1152,7 +1215,12 @@ def _make_layer(ext: str, c: _Collect, opts: dict, path) -> Layer:
         try:
             if opts["topology"]:
                 add_lines(
-                    layer, c.lines, opts["line_code"], c.closed, tolerance_m=opts["tolerance_m"]
+                    layer,
+                    c.lines,
+                    opts["line_code"],
+                    c.closed,
+                    tolerance_m=opts["tolerance_m"],
+                    crs=opts.get("crs"),
                 )
             else:
                 _plain_lines(layer, c.lines, c.closed, opts["line_code"])
@@ -1271,6 +1339,7 @@ def read(
     except ValueError as exc:  # RecordError
         raise FormatError(f"map header: {exc}", path=path) from None
     _report(path, stats)
+    opts["crs"] = m.crs  # tolerance_m is metres: add_lines converts it to the CRS's units
     for ext, c in collected.items():
         m.add_layer(_make_layer(ext, c, opts, path))
     return m

@@ -42,11 +42,12 @@ import numpy as np
 
 from apygis.errors import DriverError, FormatError, RecordError, ValueRangeError
 from apygis.formats import Driver
-from apygis.formats._io import atomic_write_many, read_bytes
+from apygis.formats._io import atomic_write_many, check_resolution, read_bytes, significant_step
+from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows, loads_json
 from apygis.model import topology
 from apygis.model.build import add_lines, export_lines
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
-from apygis.model.records import LINE_DTYPE, MAX_CODE, NO_REF, SYMBOL_DTYPE, TEXT_DTYPE
+from apygis.model.records import LINE_DTYPE, MAX_CODE, NO_REF, SYMBOL_DTYPE, TABLES, TEXT_DTYPE
 
 __all__ = [
     "DEFAULT_LAYER",
@@ -620,6 +621,38 @@ def outputs(map_: MapFile, path) -> list[Path]:
     return [_target(map_, path)]
 
 
+def _check_precision(map_: MapFile, target: Path, precision: int) -> None:
+    """Refuse coordinates that the precision's significant digits cannot hold to 1 cm."""
+    if precision not in (SINGLE, DOUBLE):
+        return  # encode() names the valid codes
+    digits = 8 if precision == SINGLE else 15
+    xy = [lay.table(t)[k] for lay in map_ for t in TABLES for k in ("x", "y")]
+    if not xy:
+        return
+    step = significant_step(np.concatenate(xy), digits)
+    if step == 0.0:
+        return
+    word = "single" if precision == SINGLE else "double"
+    what = (
+        f"E00 {word} precision holds {digits} significant digits, a step of {step:g} "
+        "units at these coordinates"
+    )
+    if map_.crs is None:
+        if step > 0.01 * (1 + 1e-9):
+            raise FormatError(
+                f"{what}, so {step:g} m would be lost: write double precision",
+                path=target,
+            )
+        return
+    try:
+        check_resolution(map_, target, step, what)
+    except FormatError as exc:
+        raise FormatError(
+            f"{exc.reason}" + (" (or write double precision)" if precision == SINGLE else ""),
+            path=target,
+        ) from None
+
+
 def write(map_: MapFile, path, progress=None, precision: int = DOUBLE) -> list[Path]:
     """Write a map as an uncompressed E00 file (one line coverage), atomically.
 
@@ -633,13 +666,16 @@ def write(map_: MapFile, path, progress=None, precision: int = DOUBLE) -> list[P
         ``progress(done, total)``.
     precision : {3, 2}
         Double (default: 15 significant digits) or single precision (8
-        digits: decimetres at Swiss coordinates; the INFO heights stay exact).
+        digits; the INFO heights stay exact). Coordinates that the digits do
+        not hold to a centimetre are refused (single precision at Swiss
+        coordinates: decimetres; degrees: 1.1 cm).
 
     Returns
     -------
     list of Path
     """
     target = _target(map_, path)
+    _check_precision(map_, target, precision)
     data = encode(map_, target, precision)
     if progress:
         progress(1, 2)
@@ -725,6 +761,7 @@ def decompress(data: bytes, path=None) -> bytes:
                 code = c - 33
                 point, odd, expo = code % 15, code // 45, (code // 15) % 3
                 digits = bytearray()
+                ndigits = 0  # digits so far, the decimal point not counted (linear time)
                 while i < n and stream[i] not in (0x20, 0x7E):
                     v = stream[i] - 33
                     i += 1
@@ -735,8 +772,14 @@ def decompress(data: bytes, path=None) -> bytes:
                         fail(f"bad digit pair code in a compressed number ({v})")
                     for d in (v // 10, v % 10):
                         digits.append(48 + d)
-                        if len(digits) - digits.count(46) == point:
+                        ndigits += 1
+                        if ndigits == point:
                             digits.append(46)
+                    if col + len(digits) > 82:  # stop at once, not at the end of the number
+                        fail(
+                            "an uncompressed line is longer than 80 characters: "
+                            "corrupt compressed data"
+                        )
                 if odd and digits:
                     del digits[-1]
                 if expo and len(digits) >= 2:
@@ -809,10 +852,10 @@ def _ints(fields: list[bytes], cur: _Cursor, line: int, what: str) -> list[int]:
     out = []
     for f in fields:
         s = f.strip()
-        try:
-            out.append(int(s) if s else 0)
-        except ValueError:
+        v = ascii_int(s, signed=True) if s else 0  # no '1_0', at most 18 digits
+        if v is None:
             cur.fail(f"{what}: expected an integer, found {f.decode('latin-1')!r}", line)
+        out.append(v)
     return out
 
 
@@ -847,20 +890,20 @@ def _fixed_reals(rows: list[bytes], lines: np.ndarray, width: int, nvals: int, c
     fields = _fixed_fields(rows, width, nvals)
     try:
         v = fields.astype(np.float64)
-        if np.isfinite(v).all():
+        if not len(bad_coord_rows(v)):
             return v
     except ValueError:
         pass
     for r in range(len(rows)):
         for c in range(nvals):
             try:
-                ok = math.isfinite(float(fields[r, c]))
+                ok = abs(float(fields[r, c])) <= MAX_COORD  # False for NaN
             except ValueError:
                 ok = False
             if not ok:
                 cur.fail(
-                    f"{what}: expected a number in {width} columns, "
-                    f"found {bytes(fields[r, c]).decode('latin-1')!r}",
+                    f"{what}: expected a number in {width} columns, finite and at most "
+                    f"{MAX_COORD:g} in magnitude, found {bytes(fields[r, c]).decode('latin-1')!r}",
                     int(lines[r]),
                 )
     raise AssertionError  # pragma: no cover
@@ -1190,17 +1233,17 @@ def _float_col(t: _Table, name: str, path) -> np.ndarray:
     raw = np.where(np.char.strip(raw) == b"", b"0", raw)
     try:
         v = raw.astype(np.float64)
-        if np.isfinite(v).all():
+        if not len(bad_coord_rows(v)):
             return v
     except ValueError:
         pass
     for k, s in enumerate(raw):
         try:
-            ok = math.isfinite(float(s))
+            ok = abs(float(s)) <= MAX_COORD  # False for NaN
         except ValueError:
             ok = False
         if not ok:
-            _bad(t, k, it, path, "a finite number", s)
+            _bad(t, k, it, path, f"a finite number of at most {MAX_COORD:g} in magnitude", s)
     raise AssertionError  # pragma: no cover
 
 
@@ -1258,13 +1301,20 @@ def _meta(tables, path) -> dict:
         joined[key] = joined.get(key, b"") + raw[k][: int(nbytes[k])]
     out = {}
     for key, b in joined.items():
-        try:
-            out[key] = json.loads(b'"' + b + b'"')
-        except ValueError:
+        what = f"INFO table {t.name}: the {key} value"
+        value = loads_json(b'"' + b + b'"', what, path=path)
+        if not isinstance(value, str):  # pragma: no cover - quotes around it make a string
+            raise FormatError(f"{what} is not an escaped string", path=path)
+        out[key] = value
+    if "SCALE" in out:
+        scale = ascii_int(out["SCALE"].strip())
+        if scale is None:
             raise FormatError(
-                f"INFO table {t.name}: the {key} value is not a valid escaped string",
+                f"INFO table {t.name}: the SCALE value {out['SCALE'][:40]!r} is not a "
+                "whole number (digits 0-9)",
                 path=path,
-            ) from None
+            )
+        out["SCALE"] = scale
     return out
 
 
@@ -1310,7 +1360,7 @@ def _map_from(info: dict, meta: dict, path, layer_opt: str | None, tol: float) -
     stem = re.sub(r"[^A-Za-z0-9_-]", "_", Path(path).stem if path else "E00")[:32] or "E00"
     try:
         crs = meta.get("CRS") or _crs_from_prj(info["prj"], path)
-        scale = int(meta["SCALE"]) if "SCALE" in meta else None
+        scale = meta.get("SCALE")
         mp = MapFile(check_map_id(meta.get("ID", stem)), scale=scale, crs=crs)
         mp.notes = meta.get("NOTES", "")
         layers = meta.get("LAYERS", "").split()
@@ -1366,7 +1416,9 @@ def _lines_to_map(info, tables, mp: MapFile, default: str, path, tol: float) -> 
     keep = [k for k in range(len(lines)) if len(lines[k])]
     layer = mp.layer(default)
     trial = layer.copy()
-    add_lines(trial, [lines[k] for k in keep], [int(codes[k]) for k in keep], None, tol)
+    add_lines(
+        trial, [lines[k] for k in keep], [int(codes[k]) for k in keep], None, tol, crs=mp.crs
+    )
     errors = [i for i in topology.validate_line_points(trial.line_points) if i.severity == "error"]
     if errors:
         log.warning(

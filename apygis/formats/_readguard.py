@@ -1,0 +1,217 @@
+"""Checks the readers share on untrusted input: JSON, digits, strings, coordinates.
+
+Every reader turns what a file holds into model values through these, so that a
+hostile or damaged file ends in a :class:`~apygis.errors.FormatError` naming the
+file and the record, never in a ``RecursionError`` (JSON nested thousands
+deep), a ``ValueError`` from :func:`int` (superscript digits that
+:meth:`str.isdigit` accepts, integers of more than 4300 digits), a string
+that cannot be written back (a lone surrogate), or an overflow further on
+(a coordinate of 1e308 in a KD-tree).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+
+import numpy as np
+
+from apygis.errors import FormatError
+
+__all__ = [
+    "MAX_COORD",
+    "MAX_INT_DIGITS",
+    "MAX_JSON_DEPTH",
+    "ascii_int",
+    "bad_coord_rows",
+    "check_coords",
+    "check_str",
+    "is_ascii_digits",
+    "loads_json",
+]
+
+MAX_COORD = 1e12
+"""The largest coordinate magnitude (metres, or degrees) a reader accepts."""
+MAX_JSON_DEPTH = 32
+"""The deepest nesting of arrays and objects in the JSON that files carry."""
+MAX_INT_DIGITS = 18
+"""The most digits of an integer in a file's fields (fits 64 bits)."""
+
+_SURROGATE = re.compile("[\ud800-\udfff]")
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
+_OPEN_CLOSE = np.zeros(256, np.int8)
+_OPEN_CLOSE[[ord("["), ord("{")]] = 1
+_OPEN_CLOSE[[ord("]"), ord("}")]] = -1
+
+
+def is_ascii_digits(s: str | bytes) -> bool:
+    """True if ``s`` is one or more of the ASCII digits 0-9 and nothing else.
+
+    Unlike :meth:`str.isdigit`, which also accepts superscripts (``'²'``) and
+    other scripts' digits that :func:`int` refuses or reads differently.
+
+    >>> is_ascii_digits("42"), is_ascii_digits("4²"), is_ascii_digits(""), is_ascii_digits(b"7")
+    (True, False, False, True)
+    """
+    if isinstance(s, bytes | bytearray):
+        return bool(s) and all(48 <= c <= 57 for c in s)
+    return bool(s) and s.isascii() and s.isdigit()
+
+
+def ascii_int(s: str | bytes, max_digits: int = MAX_INT_DIGITS, signed: bool = False) -> int | None:
+    """``s`` as an int if it is (an optional sign and) 1 to ``max_digits`` ASCII digits, else None.
+
+    >>> ascii_int("0042"), ascii_int("-3", signed=True), ascii_int("1_0"), ascii_int("9" * 40)
+    (42, -3, None, None)
+    """
+    if isinstance(s, bytes | bytearray):
+        s = bytes(s).decode("latin-1")
+    body = s[1:] if signed and s[:1] in ("-", "+") else s
+    if not is_ascii_digits(body):
+        return None
+    body = body.lstrip("0") or "0"  # int() refuses more than 4300 digits, zeros included
+    if len(body) > max_digits:
+        return None
+    return -int(body) if s[:1] == "-" and signed else int(body)
+
+
+def check_str(s: str, what: str, path=None, record: str | None = None) -> str:
+    """``s``, refused if it holds a lone surrogate (a string that cannot be encoded).
+
+    Such strings come from JSON escapes (``"\\udcfc"``) or from bytes decoded
+    with ``surrogateescape``; a map holding one could not be written.
+    """
+    m = _SURROGATE.search(s)
+    if m is not None:
+        raise FormatError(
+            f"{what} holds an undecodable character (lone surrogate U+{ord(m.group()):04X} "
+            f"at character {m.start() + 1}): not valid Unicode text",
+            path=path,
+            record=record,
+        )
+    return s
+
+
+def _reject_constant(name: str):
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+def _parse_int(s: str) -> int:
+    v = ascii_int(s, signed=True)
+    if v is None:
+        raise ValueError(f"an integer of {len(s.lstrip('-'))} digits")
+    return v
+
+
+def _parse_float(s: str) -> float:
+    v = float(s)
+    if not math.isfinite(v):
+        raise ValueError(f"the number {s[:30]} overflows")
+    return v
+
+
+def _walk_strings(value, what: str, path, record) -> None:
+    if isinstance(value, str):
+        check_str(value, what, path, record)
+    elif isinstance(value, list):
+        for v in value:
+            _walk_strings(v, what, path, record)
+    elif isinstance(value, dict):
+        for k, v in value.items():
+            check_str(k, what, path, record)
+            _walk_strings(v, what, path, record)
+
+
+def loads_json(text: str | bytes, what: str, path=None, record: str | None = None):
+    """Parse JSON from a file, every failure a FormatError naming ``what``.
+
+    Refused: text that is not UTF-8, nesting deeper than :data:`MAX_JSON_DEPTH`
+    (checked before parsing, in linear time), ``NaN`` and ``Infinity``,
+    numbers that overflow a float, integers of more than
+    :data:`MAX_INT_DIGITS` digits, and strings holding lone surrogates.
+    The caller checks the types of the values it takes.
+
+    >>> loads_json('{"a": [1, 2.5, "x"]}', "metadata")
+    {'a': [1, 2.5, 'x']}
+    >>> loads_json("[" * 100 + "]" * 100, "metadata", "F.r")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    apygis.errors.FormatError: F.r: metadata is not UTF-8 JSON: JSON nested 100 deep, ...
+    """
+
+    def fail(why: str):
+        raise FormatError(f"{what} is not UTF-8 JSON: {why}", path=path, record=record)
+
+    if isinstance(text, bytes | bytearray | memoryview):
+        try:
+            text = bytes(text).decode("utf-8")
+        except UnicodeDecodeError as exc:
+            fail(f"not UTF-8 ({exc.reason} at byte {exc.start})")
+    depth = _json_depth(text)
+    if depth > MAX_JSON_DEPTH:
+        fail(f"JSON nested {depth} deep, more than the {MAX_JSON_DEPTH} allowed")
+    try:
+        value = json.loads(
+            text,
+            parse_constant=_reject_constant,
+            parse_int=_parse_int,
+            parse_float=_parse_float,
+        )
+    except RecursionError:  # pragma: no cover - the depth check comes first
+        fail("JSON nested too deep")
+    except ValueError as exc:  # JSONDecodeError and the hooks' refusals
+        fail(f"not JSON ({exc})")
+    _walk_strings(value, what, path, record)
+    return value
+
+
+def _json_depth(text: str) -> int:
+    """The deepest nesting of ``[`` and ``{`` outside strings (an upper bound for bad JSON)."""
+    bare = _JSON_STRING.sub("", text)
+    if not bare:
+        return 0
+    codes = np.frombuffer(bare.encode("utf-8", "surrogatepass"), np.uint8)
+    steps = _OPEN_CLOSE[codes]
+    if not steps.any():
+        return 0
+    return int(np.cumsum(steps, dtype=np.int64).max())
+
+
+def bad_coord_rows(xyz) -> np.ndarray:
+    """Indices of the rows of ``xyz`` (or of the values of a 1-D array) that are not
+    finite or exceed :data:`MAX_COORD` in magnitude."""
+    a = np.asarray(xyz, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(a) <= MAX_COORD)  # NaN compares False
+    if bad.ndim > 1:
+        bad = bad.any(axis=tuple(range(1, bad.ndim)))
+    return np.flatnonzero(bad)
+
+
+def check_coords(xyz, path=None, record=None, what: str = "coordinates") -> None:
+    """Refuse coordinates that are not finite or exceed :data:`MAX_COORD` in magnitude.
+
+    ``record`` names where the first bad row is: a string, or a callable
+    ``record(row_index) -> str`` (``"line 12"``) so that the message names
+    the line or record of the file.
+
+    >>> check_coords([[1.0, 2.0], [1e308, 0.0]], "F", lambda i: f"row {i}")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    apygis.errors.FormatError: F: row 1: coordinates (1e+308, 0.0) are not finite ...
+    """
+    rows = bad_coord_rows(xyz)
+    if not len(rows):
+        return
+    i = int(rows[0])
+    a = np.asarray(xyz, dtype=np.float64)
+    shown = tuple(float(v) for v in np.atleast_1d(a[i]))
+    shown_s = f"({', '.join(repr(v) for v in shown)})" if len(shown) > 1 else repr(shown[0])
+    more = f" (and {len(rows) - 1} more)" if len(rows) > 1 else ""
+    where = record(i) if callable(record) else record
+    raise FormatError(
+        f"{what} {shown_s} are not finite or exceed {MAX_COORD:g} in magnitude{more}",
+        path=path,
+        record=where,
+    )
