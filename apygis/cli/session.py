@@ -7,32 +7,60 @@ import click
 from apygis.cli._common import run_guarded
 
 
-def _copy_map(src_base, out_dir, overwrite: bool):
-    """Copy the APY layer files of ``src_base`` into ``out_dir``; returns the new base."""
+def _copy_map(src_base, out, overwrite: bool):
+    """Copy the APY layer files of ``src_base`` to ``out`` (``dir/ID``); returns ``out``.
+
+    Called with the session lock on ``out`` held. The source is read before
+    anything in the output folder is touched.
+    """
     from pathlib import Path
 
     import apygis
     from apygis.errors import FileOverwriteError
 
-    src_base = Path(src_base)
-    out = Path(out_dir) / src_base.name
+    src_base, out = Path(src_base), Path(out)
     if Path(str(out) + ".journal").exists():
         return out  # a session was interrupted there: recover it
-    existing = [p for p in out.parent.glob(out.name + ".*")] if out.parent.is_dir() else []
+    lock = out.name + ".lock"
+    existing = (
+        [p for p in sorted(out.parent.glob(out.name + ".*")) if p.name != lock]
+        if out.parent.is_dir()
+        else []
+    )
     if existing and not overwrite:
         raise FileOverwriteError(
-            f"{existing[0]} exists; use --overwrite to start over in {out_dir}"
+            f"{existing[0]} exists; use --overwrite to start over in {out.parent}"
         )
-    for p in existing:
-        p.unlink()
+    m = None
     try:
         m = apygis.read(src_base, driver="apy")
     except apygis.ApygisError:
         if any(src_base.parent.glob(src_base.name + ".*")):
             raise
-        return out  # a new map
-    apygis.write(m, out, driver="apy")
-    return out
+    for p in existing:
+        p.unlink()
+    if m is not None:
+        apygis.write(m, out, driver="apy")
+    return out  # without m: a new map
+
+
+def _tablet_spec(tablet: str) -> tuple[str, str]:
+    """``PROTOCOL:URL`` -> (protocol, url), both checked."""
+    from apygis.instrument.tablet import PROTOCOLS
+
+    protocol, sep, url = tablet.partition(":")
+    protocol = protocol.strip().lower()
+    if not sep or not url.strip():
+        raise click.BadParameter(
+            f"{tablet!r}: expected PROTOCOL:URL, e.g. calcomp:/dev/ttyUSB0", param_hint="--tablet"
+        )
+    if protocol not in PROTOCOLS:
+        raise click.BadParameter(
+            f"{tablet!r}: unknown tablet protocol {protocol!r}; expected one of "
+            f"{', '.join(PROTOCOLS)}",
+            param_hint="--tablet",
+        )
+    return protocol, url
 
 
 @click.command()
@@ -51,6 +79,17 @@ def _copy_map(src_base, out_dir, overwrite: bool):
 @click.option("-o", "--output", type=click.Path(file_okay=False), help="Work on a copy here.")
 @click.option("--overwrite", is_flag=True, help="Replace files of an earlier run in --output.")
 @click.option("--recover-only", is_flag=True, help="Recover a journal, save, and stop.")
+@click.option(
+    "--discard-journal",
+    is_flag=True,
+    help="Rename a journal left behind aside (MAP.journal.discarded) instead of recovering it.",
+)
+@click.option(
+    "--trust-journal",
+    is_flag=True,
+    help="Recover a journal left behind even though the layer files changed since "
+    "(or it is too old to tell): the replay overwrites those changes.",
+)
 @click.option("--library", type=click.Path(), help="Symbol library.")
 @click.option(
     "--pad", type=click.Path(dir_okay=False), help="Button pad file (docs/button-pad.md)."
@@ -59,7 +98,7 @@ def _copy_map(src_base, out_dir, overwrite: bool):
 @run_guarded
 def session(
     map_path, orientation, layer, tablet, motors, replay, record, output, overwrite,
-    recover_only, library, pad, realtime,
+    recover_only, discard_journal, trust_journal, library, pad, realtime,
 ):  # fmt: skip
     """Run a revision session on MAP (dir/ID), or replay a recorded one.
 
@@ -72,52 +111,51 @@ def session(
     Every entry is journaled (MAP.journal) before it is acknowledged; the
     layer files are saved after every 50 entries, on PROCEED and at the end,
     with the margin file MAP-margin.apa. A session started on a map whose
-    journal was left behind by a crash recovers it first.
+    journal was left behind by a crash recovers it first -- if the layer
+    files are still those the journal knows; if they changed since, it
+    refuses (see --discard-journal and --trust-journal).
+
+    One session at a time per map: a session holds the lock MAP.lock and a
+    second one is refused. Everything (orientation, pad, tablet, recording,
+    ports) is checked before any file is written.
     """
+    import contextlib
     from pathlib import Path
 
     from apygis.compile.oriented import OrientedGeometry
-    from apygis.compile.session import ReportDecoder, Session, run_tablet_stream
-    from apygis.instrument.replay import Replayer, read_recording
+    from apygis.compile.session import ReportDecoder, Session, SessionLock, run_tablet_stream
+    from apygis.errors import ApygisError, FileOverwriteError, RecordError
+    from apygis.instrument.replay import Replayer, check_recording
     from apygis.instrument.simulator import BUTTONS
     from apygis.instrument.tablet import TabletConfig, make_parser
+    from apygis.model.map import check_ext
     from apygis.model.symbols import load_library
     from apygis.orient.io import load_orientation
 
     if sum(bool(x) for x in (tablet, replay, recover_only)) != 1:
         raise click.UsageError("give one of --tablet, --replay or --recover-only")
-    base = Path(map_path)
-    if output:
-        base = _copy_map(base, output, overwrite)
-    orient = load_orientation(orientation)
-    geometry = OrientedGeometry(orient)
-    meta = {}
-    if replay:
-        meta, _ = read_recording(replay)
-    protocol = (tablet.split(":", 1)[0] if tablet else meta.get("protocol", "calcomp")).lower()
-    config = TabletConfig(counts_per_mm=float(meta.get("counts_per_mm", 40.0)))
-    ctl = None
-    if motors and not recover_only:
-        from apygis.instrument.motors import SimulatedGrbl, open_controller
-
-        if motors == "sim":
-            sim = SimulatedGrbl()
-            ctl = open_controller(sim.serve_tcp())
-        elif motors.startswith("grbl:"):
-            ctl = open_controller(motors[5:])
-        else:
-            raise click.BadParameter("grbl:URL or sim", param_hint="--motors")
-    sess = Session(
-        base,
-        geometry,
-        layer=layer,
-        motors=ctl,
-        monitor=click.echo,
-        library=load_library(library),
-    )
+    if discard_journal and trust_journal:
+        raise click.UsageError("--discard-journal and --trust-journal exclude each other")
+    if motors and not (motors == "sim" or (motors.startswith("grbl:") and motors[5:])):
+        raise click.BadParameter(f"{motors!r}: grbl:URL or sim", param_hint="--motors")
     try:
-        if recover_only:
-            return
+        check_ext(layer)
+    except RecordError as exc:
+        raise click.BadParameter(str(exc), param_hint="--layer") from None
+
+    # 1. everything the session needs, checked before any file is read or written
+    geometry = OrientedGeometry(load_orientation(orientation))
+    lib = load_library(library)
+    meta: dict = {}
+    protocol = url = None
+    if tablet:
+        protocol, url = _tablet_spec(tablet)
+    if replay:
+        meta = check_recording(replay)
+        protocol = str(meta.get("protocol", "calcomp")).lower()
+    config = TabletConfig(counts_per_mm=float(meta.get("counts_per_mm", 40.0)))
+    parser = decoder = None
+    if not recover_only:
         parser = make_parser(protocol, config)
         if pad:
             from apygis.instrument.pad import load_pad
@@ -125,39 +163,99 @@ def session(
             decoder = ReportDecoder(config, load_pad(pad))
         else:
             decoder = ReportDecoder(config, BUTTONS)
-        if replay:
-            run_tablet_stream(sess, Replayer(replay, realtime=realtime).chunks(), parser, decoder)
-        else:
-            _live(sess, tablet.split(":", 1)[1], parser, decoder, record, protocol, config)
-    finally:
-        if not sess.finished:
+    if record and Path(record).exists():
+        raise FileOverwriteError(f"{record}: exists; choose another name for --record")
+    source = Path(map_path)
+    base = Path(output) / source.name if output else source
+    made_dir = not base.parent.exists()
+
+    # 2. the map's lock, then the instruments, then the files
+    lock = SessionLock.acquire(base)
+    port = ctl = sess = None
+    try:
+        if tablet:
+            port = _open_tablet(url)
+        if motors and not recover_only:
+            ctl = _open_motors(motors)
+        if output:
+            _copy_map(source, base, overwrite)
+        sess = Session(
+            base,
+            geometry,
+            layer=layer,
+            motors=ctl,
+            monitor=click.echo,
+            library=lib,
+            lock=lock,
+            discard_journal=discard_journal,
+            trust_journal=trust_journal,
+        )
+    except BaseException:
+        for thing in (port, ctl):
+            if thing is not None:
+                with contextlib.suppress(Exception):
+                    thing.close()
+        lock.release()
+        if made_dir:
+            with contextlib.suppress(OSError):
+                base.parent.rmdir()  # only if empty: nothing was written
+        raise
+
+    # 3. the session
+    try:
+        if not recover_only and not sess.finished:
+            if replay:
+                run_tablet_stream(sess, Replayer(replay, realtime=realtime), parser, decoder)
+            else:
+                _live(sess, port, url, parser, decoder, record, protocol, config)
+    except BaseException:
+        with contextlib.suppress(ApygisError):  # it has told the operator what it could not save
             sess.close()
+        raise
+    finally:
         if ctl is not None:
-            ctl.close()
-        stats = parser.stats if not recover_only else {}
+            with contextlib.suppress(Exception):
+                ctl.close()
+        if port is not None:
+            with contextlib.suppress(Exception):
+                port.close()
+        stats = parser.stats if parser is not None else {}
         if stats:
             click.echo(
                 f"tablet: {stats['packets']} reports, {stats['discarded_bytes']} bytes discarded, "
                 f"{stats['resyncs']} resyncs",
             )
+    sess.close()  # input ended without terminating: save, keep the journal
 
 
-def _live(sess, url, parser, decoder, record, protocol, config):
+def _open_tablet(url):
+    import serial
+
+    from apygis.errors import InstrumentError
+
+    try:
+        return serial.serial_for_url(url, timeout=0.002)
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise InstrumentError(f"cannot open the tablet port {url}: {exc}") from exc
+
+
+def _open_motors(motors):
+    from apygis.instrument.motors import SimulatedGrbl, open_controller
+
+    if motors == "sim":
+        return open_controller(SimulatedGrbl().serve_tcp())
+    return open_controller(motors[5:])
+
+
+def _live(sess, port, url, parser, decoder, record, protocol, config):
     """Read the tablet, and typed lines on standard input, until the session ends."""
     import queue
     import sys
     import threading
 
-    import serial
-
     from apygis.compile.session import run_live
-    from apygis.errors import InstrumentError
     from apygis.instrument.replay import Recorder
 
-    try:
-        port = serial.serial_for_url(url, timeout=0.002)
-    except (serial.SerialException, OSError, ValueError) as exc:
-        raise InstrumentError(f"cannot open the tablet port {url}: {exc}") from exc
     rec = None
     if record:
         rec = Recorder(record, meta={"protocol": protocol, "counts_per_mm": config.counts_per_mm})
@@ -166,8 +264,14 @@ def _live(sess, url, parser, decoder, record, protocol, config):
     typed: queue.Queue = queue.Queue()
 
     def keyboard():
-        for line in sys.stdin:
-            typed.put(line.rstrip("\n"))
+        # raw bytes: the session decodes them (UTF-8, else Latin-1, and tells the operator)
+        stream = getattr(sys.stdin, "buffer", None)
+        if stream is None:
+            for line in sys.stdin:
+                typed.put(line.rstrip("\n"))
+            return
+        for line in stream:
+            typed.put(line.rstrip(b"\r\n"))
 
     threading.Thread(target=keyboard, daemon=True).start()
     try:
@@ -175,6 +279,5 @@ def _live(sess, url, parser, decoder, record, protocol, config):
     except KeyboardInterrupt:
         click.echo("interrupted")
     finally:
-        port.close()
         if rec is not None:
             rec.close()

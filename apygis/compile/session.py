@@ -40,11 +40,32 @@ from apygis.compile.engine import (
     Undone,
     ZeroPlates,
 )
-from apygis.compile.journal import Journal, read_journal
+from apygis.compile.journal import (
+    MAX_MARK_MM,
+    Journal,
+    JournalWriteError,
+    check_files,
+    check_settings,
+    layer_file_states,
+    planned_file_states,
+    read_journal,
+)
+from apygis.errors import ApygisError
 from apygis.model.map import MapFile
 from apygis.model.topology import margin_mask
 
-__all__ = ["ReportDecoder", "Session", "margin_map", "run_live", "run_tablet_stream"]
+__all__ = [
+    "ReportDecoder",
+    "SaveError",
+    "Session",
+    "SessionLock",
+    "SessionLockError",
+    "SessionLockedError",
+    "decode_typed",
+    "margin_map",
+    "run_live",
+    "run_tablet_stream",
+]
 
 log = logging.getLogger(__name__)
 
@@ -98,6 +119,144 @@ def margin_map(m: MapFile) -> MapFile:
     return out
 
 
+class SessionLockedError(ApygisError, BlockingIOError):
+    """Another session holds the map (its lock file names the process)."""
+
+
+class SaveError(ApygisError, OSError):
+    """The layer files could not be saved at the end; the journal keeps every entry."""
+
+
+class SessionLockError(ApygisError, OSError):
+    """The session lock file cannot be created."""
+
+
+class SessionLock:
+    """An exclusive lock on a map for one session: ``dir/ID.lock``.
+
+    An OS file lock (``flock``) on the lock file, so the kernel releases it
+    when the holding process ends, however it ends (``kill -9`` included):
+    a lock file left behind by a dead process does not block. The holder
+    writes its pid, host and start time into the file for the message a
+    second session gets. :meth:`release` removes the file.
+    """
+
+    def __init__(self, path: Path, fd: int):
+        self.path = path
+        self._fd: int | None = fd
+
+    @classmethod
+    def acquire(cls, base) -> SessionLock:
+        """Lock the map ``base`` (``dir/ID``), or raise :class:`SessionLockedError`."""
+        import datetime
+        import fcntl
+        import json
+        import os
+        import socket
+
+        base = Path(base)
+        path = base.with_name(base.name + ".lock")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SessionLockError(f"{path.parent}: cannot create the folder: {exc}") from None
+        for _ in range(100):
+            try:
+                fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+            except OSError as exc:
+                raise SessionLockError(
+                    f"{path}: cannot create the session lock file: {exc.strerror or exc}"
+                ) from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                holder = _lock_holder(fd)
+                os.close(fd)
+                raise SessionLockedError(
+                    f"{base}: the map is in use by another session ({holder}; lock file "
+                    f"{path}); wait for it to end, or end it"
+                ) from None
+            try:  # the file we locked may have been removed by a releasing holder: retry
+                same = os.stat(path).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                same = False
+            if not same:
+                os.close(fd)
+                continue
+            info = {
+                "pid": os.getpid(),
+                "host": socket.gethostname(),
+                "started": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+            }
+            try:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, (json.dumps(info) + "\n").encode("utf-8"), 0)
+            except OSError:
+                pass  # the lock holds without the note
+            return cls(path, fd)
+        raise SessionLockError(f"{path}: cannot take the session lock (the file keeps changing)")
+
+    @property
+    def held(self) -> bool:
+        return self._fd is not None
+
+    def release(self) -> None:
+        """Remove the lock file and release the lock (idempotent)."""
+        import contextlib
+        import os
+
+        if self._fd is None:
+            return
+        fd, self._fd = self._fd, None
+        with contextlib.suppress(OSError):
+            os.unlink(self.path)  # still holding it: nobody can lock this file meanwhile
+        os.close(fd)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
+
+
+def _lock_holder(fd: int) -> str:
+    import json
+    import os
+
+    try:
+        info = json.loads(os.pread(fd, 4096, 0).decode("utf-8"))
+        return f"pid {int(info['pid'])} on {info['host']}, started {info['started']}"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "a process that has not yet written its pid"
+
+
+def decode_typed(raw) -> tuple[str, str | None]:
+    """A typed line as text, and a note for the operator when it was not clean UTF-8.
+
+    ``raw`` is bytes from the keyboard (or a str that may carry
+    ``surrogateescape`` characters, as ``sys.stdin`` gives on a Latin-1
+    terminal). Bytes that are not UTF-8 are read as Latin-1 (the usual
+    8-bit terminal encoding: ``b"M\\xfcller"`` is ``"Müller"``) and the note
+    says so.
+
+    >>> decode_typed(b"M\\xfcller")[0], decode_typed("Kirchweg")
+    ('Müller', ('Kirchweg', None))
+    """
+    if isinstance(raw, str):
+        try:
+            raw = raw.encode("utf-8", "surrogateescape")
+        except UnicodeEncodeError:  # a surrogate that no decoder made: not text at all
+            raw = raw.encode("utf-8", "replace")
+    try:
+        return raw.decode("utf-8"), None
+    except UnicodeDecodeError as exc:
+        text = raw.decode("latin-1")
+        return text, (
+            f"typed text is not UTF-8 (byte 0x{raw[exc.start]:02x} at {exc.start + 1}); "
+            f"read as Latin-1: {text!r}"
+        )
+
+
 class Session:
     """A revision session over the map ``base`` (``dir/ID``).
 
@@ -115,7 +274,21 @@ class Session:
     monitor : callable(str), optional
         Receives the operator's monitor lines.
     settings : dict
-        Engine settings (``snap_mm``, ``sample_tolerance_mm``, ``autosave_every``).
+        Engine settings (``snap_mm``, ``sample_tolerance_mm``, ``autosave_every``,
+        ``start_z_m``; :data:`apygis.compile.journal.SETTINGS`).
+    lock : SessionLock, optional
+        The map's lock, already taken (the CLI takes it before it copies the
+        map); else the session takes it first thing, and a map another
+        session holds is a :class:`SessionLockedError`. Released at the end.
+    discard_journal : bool
+        A journal left behind is renamed aside (``ID.journal.discarded``,
+        ``.discarded-2``, ...) instead of recovered.
+    trust_journal : bool
+        Recover a journal left behind even when the layer files changed
+        since, or when it is a version 1 journal that cannot tell.
+
+    Nothing is written before every check has passed: a bad journal, a
+    changed file or a bad setting leaves the files as they were.
     """
 
     def __init__(
@@ -130,23 +303,57 @@ class Session:
         scale: int | None = None,
         crs=None,
         settings: dict | None = None,
+        lock: SessionLock | None = None,
+        discard_journal: bool = False,
+        trust_journal: bool = False,
     ):
-        import apygis
+        from apygis.errors import RecordError
+        from apygis.model.map import check_ext
 
         self.base = Path(base)
+        layer = check_ext(layer)
+        try:
+            settings = check_settings(dict(settings or {}))
+        except ValueError as exc:
+            raise RecordError(str(exc)) from None
+        self.lock = lock if lock is not None else SessionLock.acquire(self.base)
+        try:
+            self._start(
+                geometry, layer, motors, monitor, library, scale, crs, settings,
+                discard_journal, trust_journal,
+            )  # fmt: skip
+        except BaseException:
+            self.lock.release()
+            raise
+
+    def _start(
+        self, geometry, layer, motors, monitor, library, scale, crs, settings,
+        discard_journal, trust_journal,
+    ):  # fmt: skip
+        import apygis
+
         self.geometry = geometry
         self.motors = motors
         self.monitor = monitor or (lambda line: None)
         self.library = library
-        self.settings = dict(settings or {})
+        self.settings = settings
         self.journal_path = self.base.with_name(self.base.name + ".journal")
         self.entries = 0
         self.saves = 0
+        self.save_failures = 0
         self.finished = False
         self._closed = False
+        self._failed: Exception | None = None
         self._last_status = None
+        self._replaying = False
+        if self.journal_path.exists() and discard_journal:
+            aside = _aside(self.journal_path)
+            self.journal_path.rename(aside)
+            self.monitor(f"journal {self.journal_path.name} discarded: renamed to {aside.name}")
         if self.journal_path.exists():
             j = read_journal(self.journal_path)
+            if not trust_journal:
+                check_files(j, self.base)
             self.settings = j.settings
             self.map = j.map
             self.engine = self._engine(j.layer)
@@ -162,21 +369,22 @@ class Session:
             )
             self.save("recovery")
         else:
-            files = [p for p in self.base.parent.glob(self.base.name + ".*")]
-            if any(p.suffix not in (".journal", ".apa") for p in files):
+            files = layer_file_states(self.base)
+            if files:
                 self.map = apygis.read(self.base, driver="apy")
             else:
                 self.map = MapFile(self.base.name, scale=scale, crs=crs)
                 self.base.parent.mkdir(parents=True, exist_ok=True)
             self.settings.setdefault("start_z_m", _mean_height(self.map))
             self.engine = self._engine(layer)
-            self.journal = Journal.create(self.journal_path, self.map, layer, self.settings)
+            self.journal = Journal.create(self.journal_path, self.map, layer, self.settings, files)
             self.recovered = 0
-            self._replaying = False
         self.monitor(
             f"map {self.map.id}, compiling into layer {self.engine.layer_ext}; "
             f"journal {self.journal_path.name}"
         )
+        if self.engine.terminated:  # the journal ends with TERMINATE: finish what it began
+            self.finish()
 
     def _engine(self, layer: str) -> Engine:
         s = self.settings
@@ -194,8 +402,25 @@ class Session:
     # ------------------------------------------------------------------ input
 
     def handle(self, event) -> list:
-        """One event through the engine; journaled, then acted on. Returns the effects."""
+        """One event through the engine; journaled, then acted on. Returns the effects.
+
+        A :class:`Keys` event's text may be bytes, or a str carrying
+        ``surrogateescape`` characters: it is decoded by :func:`decode_typed`.
+        """
+        if self._failed is not None:
+            raise JournalWriteError(f"the session stopped: {self._failed}")
         if self.finished:
+            return []
+        if isinstance(event, Keys):
+            text, note = decode_typed(event.text)
+            if note is not None:
+                self.monitor(note)
+            event = Keys(text)
+        elif isinstance(event, Mark) and not all(
+            -MAX_MARK_MM <= v <= MAX_MARK_MM for v in (event.x_mm, event.y_mm)
+        ):
+            # a position no tablet gives (a wrong counts_per_mm, line noise): never journaled
+            self.monitor(f"mark ({event.x_mm:g}, {event.y_mm:g}) mm is off any tablet: ignored")
             return []
         return self._apply(event, journal=True)
 
@@ -206,11 +431,19 @@ class Session:
                 break
 
     def _apply(self, event, journal: bool) -> list:
-        effects = self.engine.handle(event)
-        entry = any(isinstance(e, RECORD_EFFECTS) for e in effects)
         if journal:
-            # on disk before anything is acknowledged
-            self.journal.append(event, sync=entry or any(isinstance(e, Terminate) for e in effects))
+            try:
+                self.journal.append(event, sync=False)
+            except JournalWriteError as exc:
+                self._failed = exc
+                raise
+        effects = self.engine.handle(event)
+        if journal and any(isinstance(e, (*RECORD_EFFECTS, Terminate)) for e in effects):
+            try:
+                self.journal.sync()  # on disk before anything is acknowledged
+            except JournalWriteError as exc:
+                self._failed = exc
+                raise
         for e in effects:
             self._effect(e)
         return effects
@@ -257,8 +490,16 @@ class Session:
     # ------------------------------------------------------------------ files
 
     def save(self, reason: str) -> list[Path]:
-        """Write the layer files atomically (all layers that hold records)."""
+        """Write the layer files atomically (all layers that hold records).
+
+        The file states the save will leave are journaled first, so that a
+        recovery knows them. A failure to write (a full disk) is told to the
+        operator and the session goes on: the journal still holds every
+        entry, and the next save tries again. Only the final save
+        (``reason="terminate"``) raises :class:`SaveError`.
+        """
         import apygis
+        from apygis.formats.apy import encode_layer
 
         layers = [lay for lay in self.map if len(lay)]
         if not layers:
@@ -266,32 +507,106 @@ class Session:
         m = MapFile(self.map.id, self.map.scale, self.map.crs, self.map.notes)
         for lay in layers:
             m.add_layer(lay)
-        written = apygis.write(m, self.base, driver="apy")
+        try:
+            planned = {
+                lay.ext: encode_layer(m, lay, self.base.with_name(f"{self.base.name}.{lay.ext}"))
+                for lay in layers
+            }
+            self.journal.record_files(planned_file_states(planned))
+            written = apygis.write(m, self.base, driver="apy")
+        except OSError as exc:  # JournalWriteError too
+            self.save_failures += 1
+            why = getattr(exc, "strerror", None) or str(exc)
+            if reason == "terminate":
+                raise SaveError(
+                    f"{self.base}: the layer files could not be saved at the end ({why}); "
+                    f"the journal {self.journal_path} keeps every entry: make room (or fix the "
+                    "cause) and run the same session command again (or with --recover-only) "
+                    "to save them"
+                ) from exc
+            self.monitor(
+                f"SAVE FAILED ({reason}): the layer files of {self.map.id} could not be written "
+                f"({why}); the journal {self.journal_path.name} still holds every entry. "
+                f"Make room in {self.base.parent}; the next save tries again"
+            )
+            return []
         self.saves += 1
         self.monitor(f"saved ({reason}): {', '.join(p.name for p in written)}")
         return written
 
     def finish(self) -> None:
-        """Terminate: final save, margin file, journal removed."""
+        """Terminate: final save, margin file, journal removed, lock released.
+
+        If the final save fails, the journal is kept (closed) and
+        :class:`SaveError` is raised: the next session on the map recovers it.
+        """
         import apygis
 
-        self.save("terminate")
-        margin = self.base.with_name(self.base.name + "-margin.apa")
-        mm = margin_map(self.map)
-        apygis.write(mm, margin, driver="ascii")
+        try:
+            self.save("terminate")
+            margin = self.base.with_name(self.base.name + "-margin.apa")
+            mm = margin_map(self.map)
+            try:
+                apygis.write(mm, margin, driver="ascii")
+            except OSError as exc:
+                raise SaveError(
+                    f"{margin}: the margin file could not be written "
+                    f"({getattr(exc, 'strerror', None) or exc}); the layer files are saved and "
+                    f"the journal {self.journal_path} is kept: run the session again to write it"
+                ) from exc
+        except BaseException:
+            self._closed = True
+            try:
+                self.journal.close(remove=False)
+            finally:
+                self.lock.release()
+            raise
         n = sum(len(lay.line_points) for lay in mm)
         self.monitor(f"margin file {margin.name}: {n} margin points")
-        self.journal.close(remove=True)
+        try:
+            self.journal.close(remove=True)
+        finally:
+            self.lock.release()
         self.finished = True
         self.monitor("compilation terminated")
 
     def close(self) -> None:
-        """End without terminating (input ended): save, keep the journal for a resume."""
-        if not self.finished and not self._closed:
-            self._closed = True
-            self.save("end of input")
-            self.journal.close(remove=False)
+        """End without terminating (input ended): save, keep the journal for a resume.
+
+        Raises :class:`SaveError` when the layer files could not be saved (the
+        journal is kept all the same, and the lock released).
+        """
+        if self.finished or self._closed:
+            return
+        self._closed = True
+        try:
+            failures = self.save_failures
+            if self._failed is None:
+                self.save("end of input")
+            if not self.journal.closed:
+                try:
+                    self.journal.close(remove=False)
+                except JournalWriteError as exc:
+                    self.monitor(str(exc))
             self.monitor(f"session not terminated: journal {self.journal_path.name} kept")
+            if self.save_failures > failures:
+                raise SaveError(
+                    f"{self.base}: the layer files could not be saved; the journal "
+                    f"{self.journal_path} keeps every entry: make room and run the session "
+                    "again (or with --recover-only) to save them"
+                )
+        finally:
+            self.lock.release()
+
+
+def _aside(path: Path) -> Path:
+    """A free name beside ``path`` for a discarded journal."""
+    cand = path.with_name(path.name + ".discarded")
+    k = 1
+    while cand.exists():
+        k += 1
+        cand = path.with_name(f"{path.name}.discarded-{k}")
+    return cand
 
 
 def _mean_height(m: MapFile) -> float:
@@ -322,7 +637,7 @@ def run_tablet_stream(session: Session, chunks: Iterable, parser, decoder: Repor
             for report in parser.feed(ch.data):
                 session.handle_all(decoder.events(report))
         elif ch.channel == "keyboard" and ch.direction == "rx":
-            for line in ch.data.decode("utf-8", errors="replace").splitlines():
+            for line in ch.data.splitlines():  # bytes: Session.handle decodes them
                 session.handle(Keys(line))
     if not session.finished:
         for report in parser.flush():
@@ -354,6 +669,7 @@ def run_live(session: Session, port, parser, decoder: ReportDecoder, keys=None, 
                 text = keys.get_nowait()
             except queue.Empty:
                 break
+            raw = text if isinstance(text, bytes) else text.encode("utf-8", "surrogateescape")
             if recorder is not None:
-                recorder.record("keyboard", text.encode("utf-8") + b"\n")
-            session.handle(Keys(text))
+                recorder.record("keyboard", raw + b"\n")
+            session.handle(Keys(raw))

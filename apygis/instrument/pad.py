@@ -18,12 +18,16 @@ file does not name keep their default meaning unless ``--pad-only`` (the
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from apygis.errors import FormatError
 from apygis.instrument.simulator import BUTTONS
 
 __all__ = ["load_pad", "parse_pad"]
+
+#: A button code: ASCII digits only (``str.isdigit`` also takes '²', which ``int`` refuses).
+_ASCII_DIGITS = re.compile(r"[0-9]+")
 
 
 def parse_pad(text: str, path=None, *, replace: bool = False) -> dict[int, str]:
@@ -41,8 +45,14 @@ def parse_pad(text: str, path=None, *, replace: bool = False) -> dict[int, str]:
         if not line:
             continue
         parts = line.split()
-        if len(parts) != 2 or not parts[0].isdigit():
-            raise FormatError("expected 'CODE NAME'", path=path, record=f"line {no}")
+        if len(parts) != 2 or not _ASCII_DIGITS.fullmatch(parts[0]):
+            raise FormatError(
+                "expected 'CODE NAME', CODE in ASCII digits 0-9", path=path, record=f"line {no}"
+            )
+        if len(parts[0].lstrip("0")) > 3:  # int() of thousands of digits is slow, then refused
+            raise FormatError(
+                f"button code {parts[0][:20]}... is outside 1-255", path=path, record=f"line {no}"
+            )
         code, name = int(parts[0]), parts[1].upper() if parts[1].isalpha() else parts[1]
         if not 1 <= code <= 255:
             raise FormatError(

@@ -37,7 +37,6 @@ import contextlib
 import datetime
 import json
 import logging
-import math
 import os
 import re
 import threading
@@ -56,6 +55,7 @@ __all__ = [
     "RecordingPort",
     "ReplayPort",
     "Replayer",
+    "check_recording",
     "read_recording",
 ]
 
@@ -65,6 +65,11 @@ FORMAT = "apygis-recording"
 VERSION = 1
 _CHANNEL = re.compile(r"[A-Za-z][A-Za-z0-9_.-]*\Z")
 _DIRECTIONS = ("rx", "tx")
+#: Latest chunk time a recording may give, in seconds (115 days): later is damage, and
+#: would make a real-time replay sleep for ever.
+MAX_T = 1e7
+#: Plausible tablet resolutions for the header's ``counts_per_mm``.
+COUNTS_PER_MM = (0.1, 10_000.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -249,39 +254,82 @@ def _bad(path, lineno: int, message: str) -> FormatError:
     return FormatError(message, path, f"line {lineno}")
 
 
+def _is_number(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
 def _parse_chunk(path, lineno: int, obj, last_t: float) -> Chunk:
     if not isinstance(obj, dict):
         raise _bad(path, lineno, 'expected a JSON object {"t": ..., "ch": ..., "hex": ...}')
     t = obj.get("t")
-    if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t) or t < 0:
-        raise _bad(path, lineno, f"'t' must be a non-negative number of seconds, not {t!r}")
+    # compared before any float(): a 400-digit integer must not overflow
+    if not _is_number(t) or not 0 <= t <= MAX_T:
+        raise _bad(
+            path,
+            lineno,
+            f"'t' must be a non-negative number of seconds (at most {MAX_T:g}), not {t!r:.40}",
+        )
+    t = float(t)
     if t < last_t:
         raise _bad(path, lineno, f"time {t} goes back (the line before has {last_t})")
     ch = obj.get("ch")
     if not isinstance(ch, str) or not _CHANNEL.match(ch):
-        raise _bad(path, lineno, f"'ch' must be a channel name such as \"tablet\", not {ch!r}")
+        raise _bad(path, lineno, f"'ch' must be a channel name such as \"tablet\", not {ch!r:.40}")
     direction = obj.get("dir", "rx")
     if direction not in _DIRECTIONS:
-        raise _bad(path, lineno, f'\'dir\' must be "rx" or "tx", not {direction!r}')
+        raise _bad(path, lineno, f'\'dir\' must be "rx" or "tx", not {direction!r:.40}')
     hx = obj.get("hex")
     if not isinstance(hx, str):
-        raise _bad(path, lineno, f"'hex' must be a string of hex digits, not {hx!r}")
+        raise _bad(path, lineno, f"'hex' must be a string of hex digits, not {hx!r:.40}")
     try:
         data = bytes.fromhex(hx)
     except ValueError:
         raise _bad(
             path, lineno, f"'hex' is not an even number of hex digits: {hx[:40]!r}"
         ) from None
-    return Chunk(float(t), ch, data, direction)
+    return Chunk(t, ch, data, direction)
 
 
 def _check_header(path, obj) -> dict:
+    """The header, every field it may carry checked for its type and range."""
+    from apygis.instrument.tablet import PROTOCOLS
+
     if not isinstance(obj, dict) or obj.get("format") != FORMAT:
         raise _bad(path, 1, f'not an apygis recording: the header needs "format": "{FORMAT}"')
     version = obj.get("version")
-    if version != VERSION:
-        raise _bad(path, 1, f"recording version {version!r} is not supported (expected {VERSION})")
+    if not isinstance(version, int) or isinstance(version, bool) or version != VERSION:
+        raise _bad(
+            path, 1, f"recording version {version!r:.40} is not supported (expected {VERSION})"
+        )
+    created = obj.get("created", "")
+    if not isinstance(created, str):
+        raise _bad(path, 1, f"'created' must be a date-time string, not {created!r:.40}")
+    if "protocol" in obj:
+        proto = obj["protocol"]
+        if not isinstance(proto, str) or proto.lower() not in PROTOCOLS:
+            raise _bad(
+                path,
+                1,
+                f"'protocol' must be a tablet protocol ({', '.join(PROTOCOLS)}), not {proto!r:.40}",
+            )
+    if "counts_per_mm" in obj:
+        cpm = obj["counts_per_mm"]
+        lo, hi = COUNTS_PER_MM
+        if not _is_number(cpm) or not lo <= cpm <= hi:
+            raise _bad(
+                path,
+                1,
+                f"'counts_per_mm' must be a number from {lo:g} to {hi:g} "
+                f"(40 for 1000 lpi), not {cpm!r:.40}",
+            )
     return obj
+
+
+def _loads(raw: bytes):
+    try:
+        return json.loads(raw.decode("utf-8"))
+    except RecursionError:
+        raise ValueError("JSON nested too deeply") from None
 
 
 class Replayer:
@@ -320,7 +368,7 @@ class Replayer:
         self.channels = None if channels is None else frozenset(channels)
         self.directions = frozenset(directions)
         self.realtime = realtime
-        if not speed > 0:
+        if not _is_number(speed) or not 0 < speed <= 1e6:
             raise InstrumentError(f"speed must be positive, not {speed!r}")
         self.speed = float(speed)
         self._clock = clock
@@ -340,7 +388,7 @@ class Replayer:
                 lineno += 1
                 complete = raw.endswith(b"\n")
                 try:
-                    obj = json.loads(raw.decode("utf-8"))
+                    obj = _loads(raw)
                 except (UnicodeDecodeError, ValueError) as exc:
                     if not complete:
                         log.warning(
@@ -399,6 +447,20 @@ def read_recording(path) -> tuple[dict, list[Chunk]]:
     rep = Replayer(path)
     chunks = rep.chunks()
     return rep.header or {}, chunks
+
+
+def check_recording(path) -> dict:
+    """Check every line of a recording without keeping its chunks; return the header.
+
+    For a caller that must know a recording is sound before it starts
+    anything (``apygis session --replay``).
+    """
+    rep = Replayer(path)
+    for _ in rep._records():
+        pass
+    if rep.header is None:  # only a cut-off first line
+        raise FormatError("no complete header line: not an apygis recording", path)
+    return rep.header
 
 
 class ReplayPort:

@@ -69,7 +69,10 @@ __all__ = [
     "BUTTONS",
     "BUTTON_CODES",
     "KEYS",
+    "MAX_DURATION_S",
     "MAX_REPORTS",
+    "MAX_SCRIPT_BYTES",
+    "MAX_TYPED",
     "KeyEvent",
     "Script",
     "ScriptBuilder",
@@ -82,8 +85,15 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Most reports one ``glide`` or ``hold`` may make (a guard against typos like ``hold UP 1e9``).
-MAX_REPORTS = 1_000_000
+#: Most tablet reports one script may make, all commands together (a guard against
+#: typos like ``hold UP 1e9`` or ``rate 100000``: each report costs memory and time).
+MAX_REPORTS = 200_000
+#: Longest a script may last, in seconds of script time (24 hours).
+MAX_DURATION_S = 86_400.0
+#: Most characters one script may type on the keyboard channel, all together.
+MAX_TYPED = 1_000_000
+#: Largest script file :func:`read_script` reads, in bytes.
+MAX_SCRIPT_BYTES = 16 * 1024 * 1024
 
 #: The 27-button cursor pad: button code -> name (0 is "no button").
 #: Meanings in ``docs/button-pad.md``.
@@ -242,6 +252,8 @@ class ScriptBuilder:
         self.pos: tuple[int, int] | None = None
         self.proximity_in = True
         self._line = 0
+        self.typed = 0
+        self._key_events = 0
 
     def set_rate(self, rate: float) -> ScriptBuilder:
         """Tablet reports per second from here on."""
@@ -251,8 +263,30 @@ class ScriptBuilder:
         self.rate = rate
         return self
 
+    @property
+    def reports(self) -> int:
+        """Tablet reports made so far."""
+        return len(self.events) - self._key_events
+
+    def _budget(self, n: int, what: str) -> None:
+        """Refuse ``n`` more reports beyond :data:`MAX_REPORTS`, or a time beyond the cap."""
+        if self.reports + n > MAX_REPORTS:
+            raise ProtocolError(
+                f"{what}: the script would make more than {MAX_REPORTS} tablet reports in all "
+                f"({self.reports} so far, {n} more)"
+            )
+        self._check_time(self.t + n / self.rate, what)
+
+    def _check_time(self, t: float, what: str) -> None:
+        if not t <= MAX_DURATION_S:
+            raise ProtocolError(
+                f"{what}: the script would last more than {MAX_DURATION_S:g} s (up to {t:g} s)"
+            )
+
     def _report(self, button: int = 0) -> None:
         x, y = self._where("a report")
+        if self.reports >= MAX_REPORTS or self.t > MAX_DURATION_S:
+            self._budget(1, "a report")
         self.events.append(TabletEvent(self.t, x, y, button, self.proximity_in, self._line))
         self.t += 1.0 / self.rate
 
@@ -279,7 +313,9 @@ class ScriptBuilder:
                 f"{what} of {seconds!r} s at {self.rate:g} reports/s: more than "
                 f"{MAX_REPORTS} reports, or a negative time"
             )
-        return max(1, round(n))
+        n = max(1, round(n))
+        self._budget(n, what)
+        return n
 
     def glide_counts(self, x_counts: int, y_counts: int, seconds: float) -> ScriptBuilder:
         """Reports at the rate along a straight line to (x, y) counts, over ``seconds``."""
@@ -324,13 +360,21 @@ class ScriptBuilder:
         s = float(seconds)
         if not (math.isfinite(s) and s >= 0):
             raise ProtocolError(f"wait needs a non-negative number of seconds, not {seconds!r}")
+        self._check_time(self.t + s, "wait")
         self.t += s
         return self
 
     def type(self, text: str) -> ScriptBuilder:
         """Text typed on the keyboard (the keyboard channel)."""
         if text:
-            self.events.append(KeyEvent(self.t, str(text), self._line))
+            text = str(text)
+            if self.typed + len(text) > MAX_TYPED:
+                raise ProtocolError(
+                    f"type: the script would type more than {MAX_TYPED} characters in all"
+                )
+            self.typed += len(text)
+            self._key_events += 1
+            self.events.append(KeyEvent(self.t, text, self._line))
         return self
 
     def key(self, name: str) -> ScriptBuilder:
@@ -461,6 +505,9 @@ def read_script(path, *, config: TabletConfig | None = None, rate: float = 100.0
     """Read and parse a script file (UTF-8)."""
     p = Path(path)
     try:
+        size = p.stat().st_size
+        if size > MAX_SCRIPT_BYTES:
+            raise FormatError(f"{size} bytes: a script may have at most {MAX_SCRIPT_BYTES}", p)
         text = p.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
         raise FormatError(f"not UTF-8 text ({exc.reason} at byte {exc.start})", p) from None

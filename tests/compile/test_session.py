@@ -205,6 +205,7 @@ def test_recovery_restores_records_and_the_line_in_progress(tmp_path, geometry):
     s1.journal._fh.flush()  # what a crash after the last fsync leaves behind
     with open(s1.journal_path, "ab") as fh:
         fh.write(b'{"press": "EN')  # a torn last line
+    s1.lock.release()  # the crash: the kernel drops the dead process's lock
     lines = []
     s2 = Session(base, geometry, layer="c", monitor=lines.append)
     assert s2.recovered == 3 + 7 + 3
