@@ -31,6 +31,8 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 from apygis.errors import ApygisError, FormatError
+from apygis.orient import _files
+from apygis.orient._files import MAX_JSON_BYTES, parse_json, range_error, read_input
 from apygis.orient.collinearity import ExteriorOrientation, InteriorOrientation
 from apygis.orient.height import HeightCorrection
 from apygis.orient.photo import PhotoOrientation
@@ -140,37 +142,46 @@ _INT = "integer"
 _STR = "string"
 _BOOL = "boolean"
 
+# key -> (type, range or None, unit, range applies to the magnitude); the
+# ranges are those of docs/formats/orientation.md.
 _PHOTO_KEYS = {
-    "id": _STR,
-    "focal_mm": _NUM,
-    "x0_mm": _NUM,
-    "y0_mm": _NUM,
-    "scanned": _BOOL,
-    "Xo": _NUM,
-    "Yo": _NUM,
-    "Zo": _NUM,
-    "omega_rad": _NUM,
-    "phi_rad": _NUM,
-    "kappa_rad": _NUM,
-    "sx_mm_per_m": _NUM,
-    "sy_mm_per_m": _NUM,
+    "id": (_STR, None, "", False),
+    "focal_mm": (_NUM, _files.FOCAL_MM, "mm", False),
+    "x0_mm": (_NUM, _files.MM, "mm", False),
+    "y0_mm": (_NUM, _files.MM, "mm", False),
+    "scanned": (_BOOL, None, "", False),
+    "Xo": (_NUM, _files.GROUND_M, "m", False),
+    "Yo": (_NUM, _files.GROUND_M, "m", False),
+    "Zo": (_NUM, _files.GROUND_M, "m", False),
+    "omega_rad": (_NUM, _files.ANGLE_RAD, "rad", False),
+    "phi_rad": (_NUM, _files.ANGLE_RAD, "rad", False),
+    "kappa_rad": (_NUM, _files.ANGLE_RAD, "rad", False),
+    "sx_mm_per_m": (_NUM, _files.SCALE_ABS, "mm per m", True),
+    "sy_mm_per_m": (_NUM, _files.SCALE_ABS, "mm per m", True),
 }
-_HEIGHT_KEYS = dict.fromkeys(("A", "B", "C", "D", "Xc", "Yc", "scale_m"), _NUM)
+_HEIGHT_KEYS = {
+    **dict.fromkeys(("A", "B", "C", "D", "Xc", "Yc"), (_NUM, _files.GROUND_M, "m", False)),
+    "scale_m": (_NUM, _files.SCALE_M, "m", False),
+}
 _MOTOR_KEYS = {
-    "photo_id": _STR,
-    "step_um": _NUM,
-    "plate_rotation_rad": _NUM,
-    "zero_x_steps": _INT,
-    "zero_y_steps": _INT,
-    "scale_ratio": _NUM,
+    "photo_id": (_STR, None, "", False),
+    "step_um": (_NUM, _files.STEP_UM, "um", False),
+    "plate_rotation_rad": (_NUM, _files.ANGLE_RAD, "rad", False),
+    "zero_x_steps": (_INT, _files.MOTOR_STEPS, "steps", False),
+    "zero_y_steps": (_INT, _files.MOTOR_STEPS, "steps", False),
+    "scale_ratio": (_NUM, _files.RATIO, "", False),
 }
+_COEFF = (_NUM, _files.COEFF, "", False)
 
 
 def _check_type(value, kind) -> bool:
     if kind == _NUM:
-        return (
-            isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-        )
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            return False
+        try:
+            return math.isfinite(float(value))
+        except OverflowError:  # an int beyond a double
+            return False
     if kind == _INT:
         return isinstance(value, int) and not isinstance(value, bool)
     if kind == _STR:
@@ -178,14 +189,25 @@ def _check_type(value, kind) -> bool:
     return isinstance(value, bool)
 
 
+def _shown(value) -> str:
+    r = repr(value) if not isinstance(value, int) or abs(value) < 10**30 else "a huge integer"
+    return r if len(r) <= 60 else r[:57] + "..."
+
+
 def _section(obj, keys: Mapping, where: str, path):
     if not isinstance(obj, Mapping):
-        raise FormatError("expected a JSON object", path, where)
-    for k, kind in keys.items():
+        raise FormatError(f"expected a JSON object, got {type(obj).__name__}", path, where)
+    for k, (kind, bounds, unit, magnitude) in keys.items():
         if k not in obj:
             raise FormatError(f"missing key {k!r}", path, where)
-        if not _check_type(obj[k], kind):
-            raise FormatError(f"{k!r} must be a {kind}, got {obj[k]!r}", path, where)
+        v = obj[k]
+        if not _check_type(v, kind):
+            a = "an" if kind == _INT else "a"
+            raise FormatError(f"{k!r} must be {a} {kind}, got {_shown(v)}", path, where)
+        if bounds is not None:
+            msg = range_error(v, bounds, repr(k), unit, magnitude=magnitude)
+            if msg:
+                raise FormatError(msg, path, where)
     return obj
 
 
@@ -217,7 +239,7 @@ def _parse(d, path) -> Orientation:
             ):
                 raise FormatError(f"'model' must be one of {', '.join(_TYPES)}", path, "map")
             names = [f.name for f in fields(_TYPES[m["model"]])]
-            _section(m, dict.fromkeys(names, _NUM), "map", path)
+            _section(m, dict.fromkeys(names, _COEFF), "map", path)
             transform = transform_from_dict(m)
         photos = []
         plist = d.get("photos", [])
@@ -263,7 +285,8 @@ def _parse(d, path) -> Orientation:
                 motors.append(MotorCalibration.from_dict(mc))
             except ApygisError as exc:
                 raise FormatError(str(exc), path, where) from exc
-        quality = d.get("quality") or {}
+        quality = d.get("quality")
+        quality = {} if quality is None else quality
         if not isinstance(quality, Mapping):
             raise FormatError("'quality' must be an object", path, "quality")
     except FormatError:
@@ -278,15 +301,15 @@ def dumps(orientation: Orientation) -> str:
     return json.dumps(orientation.to_dict(), indent=2, allow_nan=False) + "\n"
 
 
-def loads(text: str, path=None) -> Orientation:
-    """Parse JSON text; :class:`~apygis.errors.FormatError` names the line or key."""
-    try:
-        d = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise FormatError(
-            f"invalid JSON: {exc.msg}", path, f"line {exc.lineno} column {exc.colno}"
-        ) from None
-    return _parse(d, path)
+def loads(text: str | bytes, path=None) -> Orientation:
+    """Parse JSON text; :class:`~apygis.errors.FormatError` names the line or key.
+
+    The JSON is read by the package's guarded parser
+    (``apygis.orient._files.parse_json``): ``NaN``/``Infinity``, numbers beyond
+    a double, integers of more than 19 digits and nesting deeper than 32
+    levels are refused with a :class:`FormatError`.
+    """
+    return _parse(parse_json(text, path), path)
 
 
 def load_orientation(path) -> Orientation:
@@ -295,17 +318,13 @@ def load_orientation(path) -> Orientation:
     Raises
     ------
     FormatError
-        Not UTF-8, not JSON, not an orientation file, or a missing or
-        mistyped key (named in the message).
-    OSError
-        The file cannot be read.
+        The path is missing, a directory, a symbolic-link loop, unreadable,
+        not a regular file or larger than 4 MiB; the content is not UTF-8, not
+        JSON, not an orientation file, or has a missing, mistyped or
+        out-of-range key (named in the message).
     """
     p = Path(path)
-    try:
-        text = p.read_bytes().decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"not UTF-8 text (byte {exc.start})", p) from None
-    return loads(text, p)
+    return loads(read_input(p, "orientation file", MAX_JSON_BYTES), p)
 
 
 def save_orientation(orientation: Orientation, path) -> Path:

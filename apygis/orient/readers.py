@@ -24,6 +24,7 @@ Examples
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +32,16 @@ from pathlib import Path
 import numpy as np
 
 from apygis.errors import FormatError, MeasurementError, OrientationError
+from apygis.orient._files import (
+    ANGLE_RAD,
+    FOCAL_MM,
+    GROUND_M,
+    MAX_TEXT_BYTES,
+    MM,
+    SCALE_ABS,
+    range_error,
+    read_input,
+)
 from apygis.orient.collinearity import InteriorOrientation
 from apygis.orient.photo import PhotoOrientation, approximate_orientation
 
@@ -46,8 +57,17 @@ __all__ = [
 
 def _lines(path) -> Iterator[tuple[int, list[str]]]:
     p = Path(path)
-    data = p.read_bytes()
-    for n, raw in enumerate(data.split(b"\n"), start=1):
+    data = read_input(p, "file", MAX_TEXT_BYTES)
+    start = 0
+    n = 0
+    size = len(data)
+    while start <= size:  # line by line: no list of all lines (memory)
+        end = data.find(b"\n", start)
+        if end < 0:
+            end = size
+        raw = data[start:end]
+        start = end + 1
+        n += 1
         try:
             line = raw.decode("utf-8")
         except UnicodeDecodeError as exc:
@@ -61,13 +81,33 @@ def _lines(path) -> Iterator[tuple[int, list[str]]]:
             yield n, line.split()
 
 
-def _number(tok: str, what: str, path, n: int) -> float:
-    try:
-        v = float(tok)
-    except ValueError:
-        raise FormatError(f"{what} must be a number, got {tok!r}", path, f"line {n}") from None
+# The number syntax of docs/formats/orient-control.md: decimal point, optional
+# sign and exponent, ASCII digits only (no "1_000", no "inf", no "0x10").
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_NON_FINITE = {"nan", "inf", "infinity"}
+
+
+def _number(
+    tok: str, what: str, path, n: int, bounds=None, unit: str = "", *, magnitude=False
+) -> float:
+    """``tok`` as a float; a FormatError naming the line if not a finite number in ``bounds``."""
+    if _NUMBER.fullmatch(tok) is None:
+        if tok.lower().lstrip("+-") in _NON_FINITE:
+            raise FormatError(f"{what} must be a finite number, got {tok!r}", path, f"line {n}")
+        shown = tok if len(tok) <= 40 else tok[:37] + "..."
+        raise FormatError(f"{what} must be a number, got {shown!r}", path, f"line {n}")
+    v = float(tok)
     if not math.isfinite(v):
-        raise FormatError(f"{what} must be a finite number, got {tok!r}", path, f"line {n}")
+        shown = tok if len(tok) <= 40 else tok[:37] + "..."
+        raise FormatError(
+            f"{what} must be a finite number, got {shown!r} (beyond a double's range)",
+            path,
+            f"line {n}",
+        )
+    if bounds is not None:
+        msg = range_error(v, bounds, what, unit, magnitude=magnitude)
+        if msg:
+            raise FormatError(msg, path, f"line {n}")
     return v
 
 
@@ -87,9 +127,9 @@ def read_control(path) -> dict[str, tuple[float, float, float]]:
                 f"expected 4 fields 'ID X Y Z', got {len(f)}", Path(path), f"line {n}"
             )
         pid = f[0]
-        X = _number(f[1], "X", path, n)
-        Y = _number(f[2], "Y", path, n)
-        Z = math.nan if f[3] == "-" else _number(f[3], "Z (or '-')", path, n)
+        X = _number(f[1], "X", path, n, GROUND_M, "m")
+        Y = _number(f[2], "Y", path, n, GROUND_M, "m")
+        Z = math.nan if f[3] == "-" else _number(f[3], "Z (or '-')", path, n, GROUND_M, "m")
         if pid in out:
             raise FormatError(
                 f"point {pid} appears twice (first on line {where[pid]})", Path(path), f"line {n}"
@@ -114,7 +154,9 @@ def read_map_measurements(path) -> tuple[list[str], np.ndarray]:
                 f"expected 3 fields 'ID x_mm y_mm', got {len(f)}", Path(path), f"line {n}"
             )
         ids.append(f[0])
-        xy.append((_number(f[1], "x_mm", path, n), _number(f[2], "y_mm", path, n)))
+        xy.append(
+            (_number(f[1], "x_mm", path, n, MM, "mm"), _number(f[2], "y_mm", path, n, MM, "mm"))
+        )
     return ids, np.array(xy, dtype=float).reshape(-1, 2)
 
 
@@ -145,7 +187,9 @@ def read_photo_measurements(path) -> dict[str, tuple[list[str], np.ndarray]]:
         seen[key] = n
         ids, vals = out.setdefault(f[1], ([], []))
         ids.append(f[0])
-        vals.append((_number(f[2], "px_mm", path, n), _number(f[3], "py_mm", path, n)))
+        vals.append(
+            (_number(f[2], "px_mm", path, n, MM, "mm"), _number(f[3], "py_mm", path, n, MM, "mm"))
+        )
     return {k: (ids, np.array(v, dtype=float)) for k, (ids, v) in out.items()}
 
 
@@ -239,6 +283,9 @@ def read_photo_file(path) -> list[PhotoEntry]:
         focal = _number(f[1], "FOCAL_MM", p, n)
         if focal <= 0:
             raise FormatError(f"FOCAL_MM must be positive, got {f[1]!r}", p, rec)
+        msg = range_error(focal, FOCAL_MM, "FOCAL_MM", "mm")
+        if msg:
+            raise FormatError(msg, p, rec)
         kind = f[2].lower()
         if kind not in ("frame", "scanned"):
             raise FormatError(f"the third field must be 'frame' or 'scanned', got {f[2]!r}", p, rec)
@@ -258,10 +305,14 @@ def read_photo_file(path) -> list[PhotoEntry]:
             if key in pp:
                 if target is approx:
                     raise FormatError(f"{key} takes '=' only", p, rec)
-                pp[key] = value
+                pp[key] = _number(val, key, p, n, MM, "mm")
                 continue
-            if key in _LINEAR:
+            if key in ("sx", "sy"):
                 name = key
+                value = _number(val, key, p, n, SCALE_ABS, "mm per m", magnitude=True)
+            elif key in _LINEAR:
+                name = key
+                value = _number(val, key, p, n, GROUND_M, "m")
             elif key in ("sin_omega", "sin_phi"):
                 if target is approx:
                     raise FormatError(f"{key} takes '=' only", p, rec)
@@ -279,6 +330,9 @@ def read_photo_file(path) -> list[PhotoEntry]:
                         rec,
                     )
                 value *= _ANGLE_UNITS[unit]
+                msg = range_error(value, ANGLE_RAD, f"{key} (in radians)", "rad")
+                if msg:
+                    raise FormatError(msg, p, rec)
             if name in known or name in approx:
                 raise FormatError(f"{name} is given twice", p, rec)
             target[name] = value

@@ -87,8 +87,10 @@ from apygis.orient._fields import finite_fields
 from apygis.orient.photo import PhotoOrientation
 
 __all__ = [
+    "MAX_MOTOR_STEPS",
     "LoopBatch",
     "LoopUpdate",
+    "MarkPositionError",
     "MotorCalibration",
     "RealtimeLoop",
     "StageCalibration",
@@ -96,6 +98,19 @@ __all__ = [
     "calibrate_stage",
     "map_to_photo_scale",
 ]
+
+
+#: Largest motor position (steps) the loop ever returns: a signed 32-bit step
+#: counter, as motor controllers keep it. Positions beyond are refused.
+MAX_MOTOR_STEPS = 2**31 - 1
+#: Range of a motor step, micrometres (``1000 / step_um`` stays finite).
+MIN_STEP_UM, MAX_STEP_UM = 1e-6, 1e6
+
+
+class MarkPositionError(OrientationError):
+    """A mark position the real-time loop refuses: not finite, on or behind a
+    photo's projection centre, or one that would drive a motor beyond
+    :data:`MAX_MOTOR_STEPS`. No motor position is returned for it."""
 
 
 @dataclass(frozen=True)
@@ -205,11 +220,22 @@ class MotorCalibration:
             if isinstance(v, float) and not v.is_integer():
                 raise OrientationError(f"motor calibration {name} must be an integer")
             try:
-                object.__setattr__(self, name, int(v))
+                n = int(v)
             except (TypeError, ValueError, OverflowError):
                 raise OrientationError(f"motor calibration {name} must be an integer") from None
+            if not -MAX_MOTOR_STEPS <= n <= MAX_MOTOR_STEPS:
+                raise OrientationError(
+                    f"motor calibration {name} must lie within +-{MAX_MOTOR_STEPS} steps "
+                    "(a motor controller's step counter)"
+                )
+            object.__setattr__(self, name, n)
         if self.step_um <= 0:
             raise OrientationError("motor calibration step_um must be positive")
+        if not MIN_STEP_UM <= self.step_um <= MAX_STEP_UM:
+            raise OrientationError(
+                f"motor calibration step_um must lie in [{MIN_STEP_UM:g}, {MAX_STEP_UM:g}] um, "
+                f"got {self.step_um!r}"
+            )
 
     def steps(self, px_mm, py_mm):
         """Motor positions ``(nx, ny)`` (int64 arrays, or ints for scalars) for plate shifts."""
@@ -365,19 +391,43 @@ def _constants(po: PhotoOrientation, mc: MotorCalibration):
     )
 
 
-def _make_update(cl, cr):
-    """A specialised scalar update with the constants bound as closure cells."""
+def _step_bounds(zero: int) -> tuple[float, float]:
+    """Bounds on ``t`` so that ``zero + floor(t)`` lies within +-MAX_MOTOR_STEPS."""
+    return float(-MAX_MOTOR_STEPS - zero), float(MAX_MOTOR_STEPS - zero + 1)
+
+
+def _make_update(cl, cr, refuse):
+    """A specialised scalar update with the constants bound as closure cells.
+
+    The guards: the depth ``den`` of the point in each camera frame must be
+    negative (``q_z < 0``: in front, see :mod:`apygis.orient.rotation`; false
+    for NaN), and the four motor offsets ``t`` (before ``floor``) must lie
+    within the motor range. The fast test of the latter is one comparison,
+    ``sum(t**2) < T**2`` with ``T = MAX_MOTOR_STEPS - max|zero| - 1`` (false
+    for NaN and infinities; it implies every ``|t| < T``); only when it fails
+    are the four ranges checked exactly. ``refuse`` raises
+    :class:`MarkPositionError` with the reason.
+    """
     (lXo, lYo, lZo, l11, l21, l31, l12, l22, l32, l13, l23, l33,
      lc, lx0, ly0, lsx, lsy, lyf, lck, lsk, lzx, lzy) = cl  # fmt: skip
     (rXo, rYo, rZo, r11, r21, r31, r12, r22, r32, r13, r23, r33,
      rc, rx0, ry0, rsx, rsy, ryf, rck, rsk, rzx, rzy) = cr  # fmt: skip
     floor = math.floor
+    T = float(max(MAX_MOTOR_STEPS - max(abs(lzx), abs(lzy), abs(rzx), abs(rzy)) - 1, 0))
+    T2 = T * T
+    a0, a1 = _step_bounds(lzx)
+    b0, b1 = _step_bounds(lzy)
+    c0, c1 = _step_bounds(rzx)
+    d0, d1 = _step_bounds(rzy)
 
     def update(X, Y, Z):
         dX = X - lXo
         dY = (Y - lYo) * lyf
         dZ = Z - lZo
-        f = -lc / (l13 * dX + l23 * dY + l33 * dZ)
+        den = l13 * dX + l23 * dY + l33 * dZ
+        if not den < 0.0:
+            refuse(X, Y, Z)
+        f = -lc / den
         u = f * (l11 * dX + l21 * dY + l31 * dZ)
         v = f * (l12 * dX + l22 * dY + l32 * dZ)
         pxl = lsx * dX + u
@@ -387,11 +437,22 @@ def _make_update(cl, cr):
         dX = X - rXo
         dY = (Y - rYo) * ryf
         dZ = Z - rZo
-        f = -rc / (r13 * dX + r23 * dY + r33 * dZ)
+        den = r13 * dX + r23 * dY + r33 * dZ
+        if not den < 0.0:
+            refuse(X, Y, Z)
+        f = -rc / den
         u = f * (r11 * dX + r21 * dY + r31 * dZ)
         v = f * (r12 * dX + r22 * dY + r32 * dZ)
         pxr = rsx * dX + u
         pyr = rsy * dY + v
+        tlx = lck * pxl + lsk * pyl + 0.5
+        tly = lck * pyl - lsk * pxl + 0.5
+        trx = rck * pxr + rsk * pyr + 0.5
+        try_ = rck * pyr - rsk * pxr + 0.5
+        if not tlx * tlx + tly * tly + trx * trx + try_ * try_ < T2 and not (
+            a0 <= tlx < a1 and b0 <= tly < b1 and c0 <= trx < c1 and d0 <= try_ < d1
+        ):
+            refuse(X, Y, Z)
         return LoopUpdate(
             xl,
             yl,
@@ -401,10 +462,10 @@ def _make_update(cl, cr):
             pyl,
             pxr,
             pyr,
-            lzx + floor(lck * pxl + lsk * pyl + 0.5),
-            lzy + floor(lck * pyl - lsk * pxl + 0.5),
-            rzx + floor(rck * pxr + rsk * pyr + 0.5),
-            rzy + floor(rck * pyr - rsk * pxr + 0.5),
+            lzx + floor(tlx),
+            lzy + floor(tly),
+            rzx + floor(trx),
+            rzy + floor(try_),
         )
 
     return update
@@ -442,49 +503,107 @@ class RealtimeLoop:
         self.left_motors, self.right_motors = left_motors, right_motors
         self._cl = _constants(left, left_motors)
         self._cr = _constants(right, right_motors)
-        self.update = _make_update(self._cl, self._cr)
+        self.update = _make_update(self._cl, self._cr, self._refuse)
         self.update.__doc__ = (
             "update(X, Y, Z) -> LoopUpdate: photo coordinates, parallaxes and motor "
             "positions for one mark position (floats, metres)."
         )
 
+    def _refuse(self, X, Y, Z):
+        """Raise :class:`MarkPositionError` saying why ``(X, Y, Z)`` was refused."""
+        where = f"mark position ({X!r}, {Y!r}, {Z!r})"
+        try:
+            P = np.array([[X, Y, Z]], dtype=float)
+        except (TypeError, ValueError, OverflowError):
+            raise MarkPositionError(f"{where}: X, Y and Z must be numbers (metres)") from None
+        raise MarkPositionError(f"{where}: {self._diagnose(P)[1]}")
+
+    def _diagnose(self, P: np.ndarray) -> tuple[int, str]:
+        """The first refused row of ``P`` (N, 3) and why (slow path, errors only)."""
+        with np.errstate(all="ignore"):
+            bad = ~np.isfinite(P).all(axis=1)
+            if bad.any():
+                return int(np.argmax(bad)), "X, Y and Z must be finite numbers (metres)"
+            for po in (self.left, self.right):
+                d = P - po.exterior.centre
+                if po.interior.scanned:
+                    d[:, 1] = 0.0
+                depth = (d @ po.exterior.rotation)[:, 2]
+                bad = ~(depth < 0.0)
+                if bad.any():
+                    return int(np.argmax(bad)), (
+                        f"not in front of photo {po.photo_id} (on or behind the plane through "
+                        "its projection centre): no photo position, no motor is driven"
+                    )
+        return 0, (
+            f"a plate motor would have to go beyond +-{MAX_MOTOR_STEPS} steps "
+            "(out of range for these orientations): no motor is driven"
+        )
+
     def update_many(self, xyz) -> LoopBatch:
-        """Vectorised updates for mark positions ``xyz`` of shape (N, 3) (metres)."""
-        P = np.asarray(xyz, dtype=float)
+        """Vectorised updates for mark positions ``xyz`` of shape (N, 3) (metres).
+
+        Raises
+        ------
+        MarkPositionError
+            If any position is not finite, lies on or behind the plane of a
+            projection centre, or needs a motor position beyond
+            :data:`MAX_MOTOR_STEPS`; the message names the first such row. No
+            partial result is returned.
+        """
+        try:
+            P = np.asarray(xyz, dtype=float)
+        except (TypeError, ValueError, OverflowError):
+            raise MarkPositionError("mark positions must be numbers (metres)") from None
         if P.ndim != 2 or P.shape[1] != 3:
             raise OrientationError(f"mark positions must have shape (N, 3), got {P.shape}")
         N = len(P)
         photo = np.empty((2, N, 2))
         par = np.empty((2, N, 2))
         steps = np.empty((N, 4), dtype=np.int64)
-        for k, (po, c) in enumerate(((self.left, self._cl), (self.right, self._cr))):
-            Xo, Yo, Zo = c[0], c[1], c[2]
-            d = P - (Xo, Yo, Zo)
-            if po.interior.scanned:
-                d[:, 1] = 0.0
-            q = d @ po.exterior.rotation
-            f = np.divide(-c[12], q[:, 2], out=q[:, 2])
-            u = np.multiply(q[:, 0], f, out=q[:, 0])
-            v = np.multiply(q[:, 1], f, out=q[:, 1])
-            np.add(u, c[13], out=photo[k, :, 0])
-            np.add(v, c[14], out=photo[k, :, 1])
-            px = par[k, :, 0]
-            py = par[k, :, 1]
-            np.multiply(d[:, 0], c[15], out=px)
-            px += u
-            np.multiply(d[:, 1], c[16], out=py)
-            py += v
-            ck, sk = c[18], c[19]
-            t = np.multiply(px, ck, out=u)
-            t += sk * py
-            t += 0.5
-            np.floor(t, out=t)
-            steps[:, 2 * k] = t
-            t = np.multiply(py, ck, out=v)
-            t -= sk * px
-            t += 0.5
-            np.floor(t, out=t)
-            steps[:, 2 * k + 1] = t
-            steps[:, 2 * k] += c[20]
-            steps[:, 2 * k + 1] += c[21]
+        ok = True
+        with np.errstate(all="ignore"):  # NaN/inf are caught by the range checks below
+            for k, (po, c) in enumerate(((self.left, self._cl), (self.right, self._cr))):
+                Xo, Yo, Zo = c[0], c[1], c[2]
+                d = P - (Xo, Yo, Zo)
+                if po.interior.scanned:
+                    d[:, 1] = 0.0
+                q = d @ po.exterior.rotation
+                f = np.divide(-c[12], q[:, 2])  # contiguous, > 0 in front of the camera
+                # min is NaN if any is NaN; -inf for a point in the plane of the centre
+                if N and not f.min() > 0.0:
+                    ok = False
+                    break
+                u = np.multiply(q[:, 0], f, out=q[:, 0])
+                v = np.multiply(q[:, 1], f, out=q[:, 1])
+                np.add(u, c[13], out=photo[k, :, 0])
+                np.add(v, c[14], out=photo[k, :, 1])
+                px = par[k, :, 0]
+                py = par[k, :, 1]
+                np.multiply(d[:, 0], c[15], out=px)
+                px += u
+                np.multiply(d[:, 1], c[16], out=py)
+                py += v
+                ck, sk = c[18], c[19]
+                tx = np.multiply(px, ck, out=f)
+                tx += sk * py
+                tx += 0.5
+                ty = np.multiply(py, ck, out=u)
+                ty -= sk * px
+                ty += 0.5
+                for j, t in ((0, tx), (1, ty)):
+                    lo, hi = _step_bounds(c[20 + j])
+                    if N and not (t.min() >= lo and t.max() < hi):
+                        ok = False
+                        break
+                    np.floor(t, out=t)
+                    col = steps[:, 2 * k + j]
+                    col[:] = t
+                    col += c[20 + j]
+                if not ok:
+                    break
+        if not ok:
+            row, why = self._diagnose(P)
+            X, Y, Z = (float(v) for v in P[row])
+            raise MarkPositionError(f"mark position {row} ({X!r}, {Y!r}, {Z!r}): {why}")
         return LoopBatch(photo, par, steps)

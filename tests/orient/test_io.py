@@ -71,7 +71,10 @@ def test_empty_orientation_round_trip():
         (lambda d: d.update(version=99), "unsupported version 99"),
         (lambda d: d["photos"][1].pop("focal_mm"), r"photos\[1\]: missing key 'focal_mm'"),
         (lambda d: d["photos"][0].update(Xo="abc"), r"photos\[0\]: 'Xo' must be a number"),
-        (lambda d: d["photos"][0].update(focal_mm=-3.0), r"photos\[0\]: focal_mm must be positive"),
+        (
+            lambda d: d["photos"][0].update(focal_mm=-3.0),
+            r"photos\[0\]: 'focal_mm' must lie in \[0.001, 100000\] mm, got -3.0",
+        ),
         (lambda d: d["map"].update(model="projective"), "map: 'model' must be one of"),
         (lambda d: d["map"].pop("e"), "map: missing key 'e'"),
         (lambda d: d["motors"][0].update(zero_x_steps=1.5), r"motors\[0\]: 'zero_x_steps' must be"),

@@ -37,6 +37,9 @@ def test_orient_imports_only_errors():
                         "tempfile",
                         "pathlib",
                         "contextlib",
+                        "re",
+                        "stat",
+                        "warnings",
                     }, (f.name, n)
 
 
