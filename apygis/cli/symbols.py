@@ -13,6 +13,7 @@ from pathlib import Path
 import click
 
 from apygis.cli._common import run_guarded
+from apygis.formats._readguard import ascii_int
 from apygis.model.symbols import (
     SIZE,
     SPOT_HEIGHT,
@@ -35,9 +36,10 @@ class _Cell(click.ParamType):
         if isinstance(value, tuple):
             return value
         parts = str(value).replace(" ", "").split(",")
-        if len(parts) != 2 or not all(p.isdigit() and p.isascii() for p in parts):
+        nums = [ascii_int(p, max_digits=2) for p in parts]  # no '²', no 5000-digit strings
+        if len(parts) != 2 or None in nums:
             self.fail(f"{value!r} is not ROW,COL (two whole numbers 1-15, e.g. 8,8)", param, ctx)
-        row, col = (int(p) for p in parts)
+        row, col = nums
         if not (1 <= row <= SIZE and 1 <= col <= SIZE):
             self.fail(
                 f"{value!r} is off the 15x15 grid; rows and columns run from 1 to 15",
@@ -51,7 +53,7 @@ def _library_option(func):
     return click.option(
         "--library",
         "library_path",
-        type=click.Path(dir_okay=False, path_type=Path),
+        type=click.Path(path_type=Path),  # a directory is refused by load_library
         default=None,
         help="The symbol library file to use instead of the user library "
         "($APYGIS_SYMBOLS or ~/.config/apygis/symbols.apysym).",
@@ -59,13 +61,12 @@ def _library_option(func):
 
 
 def _load(library_path: Path | None) -> tuple[SymbolLibrary, Path]:
+    """The library and its path; a path that cannot be read is a FormatError (run_guarded)."""
     path = user_library_path() if library_path is None else library_path
+    lib = load_library(path)
     if library_path is not None and not path.exists():
         click.echo(f"note: {path} does not exist; using the default symbol set", err=True)
-    try:
-        return load_library(path), path
-    except OSError as exc:
-        raise click.ClickException(f"cannot read {path}: {exc.strerror or exc}") from exc
+    return lib, path
 
 
 @click.group("symbols")

@@ -36,6 +36,7 @@ True
 from __future__ import annotations
 
 import contextlib
+import errno
 import functools
 import logging
 import operator
@@ -571,11 +572,11 @@ class SymbolLibrary(Mapping):
         Raises
         ------
         FormatError
-            If the file is not a valid symbol library.
-        OSError
-            If the file cannot be read (missing, a directory, no permission).
+            If the file is not a valid symbol library, or cannot be read
+            (missing, a directory, a symbolic link loop, no permission); the
+            message names the path.
         """
-        data = Path(path).read_bytes()
+        data = _read_library_bytes(Path(path))
         log.debug("read symbol library %s", path)
         return cls.from_text(data, path=path)
 
@@ -618,6 +619,29 @@ _LOOSE_HEADER_RE = re.compile(r"\[(-?[0-9]*)\]")
 _ROW_CHARS = frozenset(PAINT + CLEAR)
 _BLANK = " \t"
 _TRAILING = " \t\r"
+
+
+def _unreadable(path: Path, exc: OSError) -> FormatError:
+    """The FormatError for a library path that cannot be read, naming the path."""
+    if isinstance(exc, IsADirectoryError):
+        why = "is a directory, not a symbol library file"
+    elif isinstance(exc, FileNotFoundError):
+        why = "no such symbol library file"
+    elif exc.errno == errno.ELOOP:
+        why = "a loop of symbolic links: no symbol library file can be reached"
+    elif exc.errno == errno.ENOTDIR:
+        why = "a part of the path is not a directory"
+    else:
+        why = f"cannot read the symbol library: {exc.strerror or exc}"
+    return FormatError(why, path=path)
+
+
+def _read_library_bytes(path: Path) -> bytes:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read()
+    except OSError as exc:
+        raise _unreadable(path, exc) from None
 
 
 def _decode(data: bytes, path) -> str:
@@ -797,18 +821,22 @@ def user_library_path() -> Path:
 def load_library(path=None) -> SymbolLibrary:
     """The library in ``path`` (default :func:`user_library_path`) or the default set.
 
-    If the file does not exist, a copy of :func:`default_library` is
-    returned.
+    If the file does not exist (nor does the target of a symbolic link to
+    it), a copy of :func:`default_library` is returned.
 
     Raises
     ------
     FormatError
-        If the file exists but is not a valid symbol library.
-    OSError
-        If the file exists but cannot be read.
+        If the file exists but is not a valid symbol library, or the path
+        cannot be read: a directory, a symbolic link loop, a part of it
+        that is not a directory, no permission. The message names the path.
     """
     p = user_library_path() if path is None else Path(path)
-    if not p.exists():
+    try:
+        os.stat(p)
+    except FileNotFoundError:
         log.debug("no symbol library at %s, using the default set", p)
         return default_library()
+    except OSError as exc:  # a symlink loop, ENOTDIR, EACCES: Path.exists() says False
+        raise _unreadable(p, exc) from None
     return SymbolLibrary.read(p)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 from click.testing import CliRunner
 
@@ -72,9 +74,29 @@ def test_list_bad_library(tmp_path):
     assert "Traceback" not in result.output
 
 
-def test_list_unreadable_library(tmp_path):
-    result = run("list", "--library", tmp_path)  # a directory
-    assert result.exit_code == 2  # click refuses a directory for a file option
+@pytest.mark.parametrize("command", [("list",), ("show", "5"), ("set", "5", "--name", "x")])
+def test_unreadable_library_is_one_line_exit_1(tmp_path, command):
+    """Issue 9: a directory or a symlink loop as --library: one line naming it, exit 1."""
+    loop = tmp_path / "loop.apysym"
+    os.symlink(loop, loop)
+    for path, why in ((tmp_path, "is a directory"), (loop, "loop of symbolic links")):
+        result = CliRunner().invoke(symbols, [*command, "--library", str(path)])
+        assert result.exit_code == 1, result.output
+        assert result.exception is None or isinstance(result.exception, SystemExit)
+        assert result.stderr.count("\n") == 1
+        assert str(path) in result.stderr
+        assert why in result.stderr
+        assert "does not exist" not in result.stderr
+    assert loop.is_symlink()  # set did not replace the link
+
+
+def test_cell_with_superscript_or_huge_digits_is_refused(tmp_path):
+    lib = tmp_path / "l.apysym"
+    for cell in ("8,\u00b2", "8," + "9" * 5000, "\u0663,3"):
+        result = CliRunner().invoke(symbols, ["set", "5", "--paint", cell, "--library", lib])
+        assert result.exit_code == 2, result.output
+        assert "is not ROW,COL" in result.stderr
+    assert not lib.exists()
 
 
 def test_list_env_library(user_lib):

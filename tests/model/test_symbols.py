@@ -702,8 +702,50 @@ def test_write_into_missing_directory(tmp_path):
 
 
 def test_read_missing_file(tmp_path):
-    with pytest.raises(FileNotFoundError):
-        SymbolLibrary.read(tmp_path / "missing.apysym")
+    path = tmp_path / "missing.apysym"
+    with pytest.raises(FormatError, match="no such symbol library file") as exc:
+        SymbolLibrary.read(path)
+    assert exc.value.path == str(path)
+
+
+def _symlink_loop(tmp_path):
+    a, b = tmp_path / "a.apysym", tmp_path / "b.apysym"
+    try:
+        os.symlink(b, a)
+        os.symlink(a, b)
+    except (OSError, NotImplementedError):  # pragma: no cover - no symlinks here
+        pytest.skip("symbolic links are not available")
+    return a
+
+
+@pytest.mark.parametrize("kind", ["directory", "missing", "loop", "notdir"])
+def test_unreadable_library_path_is_a_format_error_naming_it(tmp_path, kind):
+    """Issue 9: a directory, a missing file or a symlink loop escaped as a bare OSError."""
+    if kind == "directory":
+        path, match = tmp_path, "is a directory"
+    elif kind == "missing":
+        path, match = tmp_path / "gone.apysym", "no such symbol library file"
+    elif kind == "loop":
+        path, match = _symlink_loop(tmp_path), "loop of symbolic links"
+    else:
+        (tmp_path / "plain").write_text("x")
+        path, match = tmp_path / "plain" / "lib.apysym", "not a directory"
+    with pytest.raises(FormatError, match=match) as exc:
+        SymbolLibrary.read(path)
+    assert exc.value.path == str(path)
+    assert not isinstance(exc.value, OSError)
+    if kind == "missing":
+        assert load_library(path) == default_library()  # documented: the default set
+    else:
+        with pytest.raises(FormatError, match=match) as exc:
+            load_library(path)
+        assert exc.value.path == str(path)
+
+
+def test_library_from_env_that_is_a_loop(tmp_path, monkeypatch):
+    monkeypatch.setenv("APYGIS_SYMBOLS", str(_symlink_loop(tmp_path)))
+    with pytest.raises(FormatError, match="loop of symbolic links"):
+        load_library()
 
 
 def test_user_library_path(tmp_path, monkeypatch):
