@@ -31,6 +31,7 @@ __all__ = [
     "SymbolLibraryError",
     "TopologyError",
     "ValueRangeError",
+    "WriteError",
 ]
 
 
@@ -77,6 +78,18 @@ class DriverError(ApygisError, ValueError):
 
 class FileOverwriteError(ApygisError, FileExistsError):
     """The target exists and overwriting was not asked for."""
+
+
+class WriteError(ApygisError, OSError):
+    """A file could not be written (a full disk, no permission, a target that is not a file).
+
+    The message names the target, not the source, and the reason; nothing
+    half-written is left behind. ``errno`` and ``filename`` are those of the
+    ``OSError`` it stands for (the message stays as given).
+    """
+
+    def __str__(self) -> str:  # OSError would format errno and filename instead
+        return str(self.args[0]) if self.args else ""
 
 
 class RecordError(ApygisError, ValueError):

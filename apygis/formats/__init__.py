@@ -27,9 +27,18 @@ from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 
-from apygis.errors import DriverError
+from apygis.errors import ApygisError, DriverError
 
-__all__ = ["DRIVER_GROUP", "Driver", "driver_for", "drivers", "get_driver", "read", "write"]
+__all__ = [
+    "DRIVER_GROUP",
+    "Driver",
+    "driver_for",
+    "drivers",
+    "get_driver",
+    "read",
+    "verify_set",
+    "write",
+]
 
 log = logging.getLogger(__name__)
 
@@ -71,6 +80,11 @@ class Driver:
     outputs : callable, optional
         ``outputs(map, path) -> list[Path]``: the files a write would create, so
         that the CLI can refuse to overwrite them. Default: ``[path]``.
+    members : callable, optional
+        For formats that write a set of files: ``members(path) -> (stamp,
+        files, complete)`` or None, the set stamp and the files a read of
+        ``path`` takes (``complete``: all of the set, not one file of it);
+        :func:`read` checks them with :func:`apygis.formats._io.verify_set`.
     """
 
     name: str
@@ -80,6 +94,7 @@ class Driver:
     writer: Callable | None = None
     probe: Callable | None = None
     outputs: Callable | None = None
+    members: Callable | None = None
 
     @property
     def modes(self) -> str:
@@ -207,16 +222,48 @@ def read(path, driver: str | None = None, **options):
     """
     drv = get_driver(driver, "r") if driver else driver_for(path, "r")
     log.debug("reading %s with the %s driver", path, drv.name)
+    verify_set(drv, path)
     return drv.reader(os.fspath(path), **options)
+
+
+def verify_set(drv: Driver, path) -> None:
+    """Refuse to read a set of files that an interrupted write left half-replaced.
+
+    For drivers that write sets (:attr:`Driver.members`): the files a read of
+    ``path`` takes are checked against the set stamp ``NAME.apyset`` the
+    writer made (:func:`apygis.formats._io.verify_set`); a
+    :class:`~apygis.errors.FormatError` names the files that do not match.
+    """
+    if drv.members is None:
+        return
+    from apygis.formats._io import verify_set as _verify
+
+    try:
+        spec = drv.members(os.fspath(path))
+    except OSError:
+        return  # the reader reports an unreadable path itself
+    if spec is not None:
+        stamp, files, complete = spec
+        _verify(stamp, files, complete)
 
 
 def write(map, path, driver: str | None = None, **options) -> list[Path]:
     """Write a map, atomically (each file is written beside its target, then renamed).
 
     Existing files are replaced; the CLI refuses that unless ``--overwrite``.
+    Only regular files are replaced (a symlink is written through). A set of
+    files gets a set stamp (see :mod:`apygis.formats._io`). Any ``OSError``
+    is a :class:`~apygis.errors.WriteError` naming the target.
     Returns the paths written.
     """
     drv = get_driver(driver, "w") if driver else driver_for(path, "w")
     log.debug("writing %s with the %s driver", path, drv.name)
-    out = drv.writer(map, os.fspath(path), **options)
+    try:
+        out = drv.writer(map, os.fspath(path), **options)
+    except ApygisError:
+        raise
+    except OSError as exc:  # a driver's own file handling: name the target, not the source
+        from apygis.formats._io import write_failed
+
+        raise write_failed(exc.filename or path, exc) from None
     return [Path(p) for p in (out or [path])]

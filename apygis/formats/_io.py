@@ -1,52 +1,521 @@
-"""File helpers shared by the drivers: atomic writes and guarded reads."""
+"""File helpers shared by the drivers: atomic writes, set stamps and guarded reads.
+
+Every writer goes through :func:`atomic_write_many` (bytes in memory) or
+:func:`commit` (files a library such as GDAL wrote into a temporary folder):
+
+* the target is resolved through symlinks (the file a link points to is
+  written, the link stays) and must be a regular file or not exist: a device,
+  a directory or a pipe is refused (:class:`~apygis.errors.FileOverwriteError`);
+* every file is written in full to a temporary file beside its final target
+  (same directory: the rename cannot cross file systems), flushed and synced;
+* a set of several files (an APY map, a Shapefile folder, a GENERATE set)
+  gets a **set stamp** ``.NAME.apyset``, written (atomically) *before* the
+  files are renamed into place, listing every file of the new set with its
+  size and SHA-256, and the files it replaces as they were. A reader calls
+  :func:`verify_set`: a crash at any moment leaves either the old set with
+  its old stamp (or none), or the new stamp with the files all old, all new,
+  or part new and part old, which the read refuses, naming them;
+* any ``OSError`` (a full disk, no permission) becomes one
+  :class:`~apygis.errors.WriteError` naming the target and the reason, with
+  the temporary files removed;
+* temporary files and folders left by a write that was killed (their names
+  carry the writing process's id) are removed by the next write to the same
+  place.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import hashlib
+import json
+import logging
+import math
 import os
-import tempfile
+import re
+import secrets
+import stat
+import time
+from collections.abc import Iterable
 from pathlib import Path
 
-from apygis.errors import FormatError
+from apygis.errors import FileOverwriteError, FormatError, WriteError
 
-__all__ = ["atomic_write_many", "read_bytes"]
+__all__ = [
+    "STAMP_SUFFIX",
+    "atomic_write_many",
+    "check_resolution",
+    "check_target",
+    "commit",
+    "crs_unit",
+    "make_temp_dir",
+    "metres_per_unit",
+    "read_bytes",
+    "remove_stale_temps",
+    "stamp_entries",
+    "stamp_path",
+    "verify_set",
+    "write_failed",
+]
+
+log = logging.getLogger(__name__)
+
+STAMP_SUFFIX = ".apyset"
+"""A set stamp is ``.NAME.apyset`` (hidden) beside the files of the set ``NAME``."""
+STAMP_FORMAT = "apygis-set"
+
+_TMP_SUFFIX = ".apygis-tmp"
+# .NAME.<pid>-<random>.apygis-tmp (files), .apygis-<pid>-<random>.tmp (folders, see ogr.py)
+_TMP_FILE_RE = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)-[0-9a-f]{8}\.apygis-tmp$")
+_TMP_DIR_RE = re.compile(r"^\.apygis-(?P<pid>\d+)-[0-9a-f]{8}\.tmp$")
+# what earlier versions left: mkstemp's ".NAME.XXXXXXXX.tmp" and mkdtemp's ".apygis-XXXXXXXX.tmp"
+_OLD_FILE_RE = re.compile(r"^\.(?P<name>.+)\.[a-z0-9_]{8}\.tmp$")
+_OLD_DIR_RE = re.compile(r"^\.apygis-[a-z0-9_]{8}\.tmp$")
+
+_KINDS = (
+    (stat.S_ISDIR, "directory"),
+    (stat.S_ISCHR, "character device"),
+    (stat.S_ISBLK, "block device"),
+    (stat.S_ISFIFO, "named pipe"),
+    (stat.S_ISSOCK, "socket"),
+)
 
 
-def atomic_write_many(contents: dict[Path, bytes]) -> list[Path]:
-    """Write several files so that none is ever half-written.
+# --------------------------------------------------------------------------- errors
 
-    Every file is first written in full to a temporary file beside its target
-    (same directory, so the rename cannot cross file systems) and flushed to
-    disk; only when all are written are they renamed over their targets with
-    :func:`os.replace`. If anything fails before the renames, the temporary
-    files are removed and no target is touched.
+
+def write_failed(target, exc: OSError, what: str = "cannot write") -> WriteError:
+    """The :class:`WriteError` for an ``OSError`` met while writing ``target``."""
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    if exc.errno == errno.ENOSPC:
+        reason = "no space left on device"
+    err = WriteError(f"{target}: {what}: {reason.lower() if exc.strerror else reason}")
+    err.errno = exc.errno
+    err.filename = str(target)
+    return err
+
+
+# --------------------------------------------------------------------------- targets
+
+
+def check_target(target) -> Path:
+    """The file to write for ``target``: symlinks followed, a regular file or none.
+
+    A symlink is written through (the file it points to is replaced, the link
+    stays). Anything that exists and is not a regular file (a device such as
+    ``/dev/full``, a directory, a pipe) is refused.
     """
-    temps: list[tuple[str, Path]] = []
+    p = Path(target)
+    real = Path(os.path.realpath(p))
     try:
-        for target, data in contents.items():
-            target = Path(target)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-            temps.append((tmp, target))
-            os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes 0600; a plain open() would not
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(data)
-                fh.flush()
-                os.fsync(fh.fileno())
-        for tmp, target in temps:
-            os.replace(tmp, target)
-    except BaseException:
-        for tmp, _ in temps:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
-        raise
-    return [t for _, t in temps]
+        st = os.stat(real)
+    except FileNotFoundError:
+        return real
+    except OSError as exc:
+        raise write_failed(p, exc) from None
+    if stat.S_ISREG(st.st_mode):
+        return real
+    kind = next((name for test, name in _KINDS if test(st.st_mode)), "special file")
+    via = f" (the target of the link {p})" if real != p.absolute() and p.is_symlink() else ""
+    raise FileOverwriteError(
+        f"{real if via else p}{via}: is a {kind}, not a regular file; "
+        "apygis writes or replaces regular files only"
+    )
+
+
+def stamp_path(base) -> Path:
+    """The set stamp ``dir/.NAME.apyset`` of the set ``dir/NAME``."""
+    b = Path(base)
+    return b.with_name(f".{b.name}{STAMP_SUFFIX}")
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: a process of another user
+        return True
+    return True
+
+
+def remove_stale_temps(directory, names: Iterable[str] | None = None) -> list[Path]:
+    """Remove temporary files (and folders) of apygis writes killed in ``directory``.
+
+    Only apygis's own temporary names are touched: files ``.NAME.<pid>-*.apygis-tmp``
+    of a target in ``names`` (any target if None) and folders
+    ``.apygis-<pid>-*.tmp``, whose writing process is gone; and the names of
+    earlier apygis versions (no process id). One still being written by a
+    live process is left alone and reported. Returns what was removed.
+    """
+    import shutil
+
+    d = Path(directory)
+    wanted = None if names is None else set(names)
+    removed = []
+    try:
+        entries = list(os.scandir(d))
+    except OSError:
+        return removed
+    for e in entries:
+        m = _TMP_FILE_RE.match(e.name) or _OLD_FILE_RE.match(e.name)
+        is_dir = False
+        if m is not None and wanted is not None and m["name"] not in wanted:
+            continue
+        if m is None:
+            m = _TMP_DIR_RE.match(e.name) or _OLD_DIR_RE.match(e.name)
+            is_dir = True
+            if m is None:
+                continue
+        pid = int(m["pid"]) if "pid" in m.re.groupindex else None
+        if pid is not None and _alive(pid):
+            if pid != os.getpid():
+                log.warning("%s: left alone, still being written by process %d", e.path, pid)
+            continue
+        try:
+            size = _tree_size(Path(e.path)) if is_dir else e.stat(follow_symlinks=False).st_size
+            if is_dir and e.is_dir(follow_symlinks=False):
+                shutil.rmtree(e.path)
+            elif not is_dir and e.is_file(follow_symlinks=False):
+                os.unlink(e.path)
+            else:
+                continue
+        except OSError as exc:
+            log.warning("%s: left by an interrupted write; cannot remove it: %s", e.path, exc)
+            continue
+        log.warning(
+            "removed %s (%s), left by an interrupted write%s",
+            e.path,
+            _size_text(size),
+            f" (process {pid})" if pid is not None else "",
+        )
+        removed.append(Path(e.path))
+    return removed
+
+
+def _tree_size(p: Path) -> int:
+    total = 0
+    for root, _, files in os.walk(p):
+        for f in files:
+            with contextlib.suppress(OSError):
+                total += os.lstat(os.path.join(root, f)).st_size
+    return total
+
+
+def _size_text(n: int) -> str:
+    for unit in ("bytes", "KB", "MB", "GB"):
+        if n < 1024 or unit == "GB":
+            return f"{n} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n} bytes"  # pragma: no cover
+
+
+def _temp_name(target: Path) -> Path:
+    return target.with_name(f".{target.name}.{os.getpid()}-{secrets.token_hex(4)}{_TMP_SUFFIX}")
+
+
+def make_temp_dir(directory) -> Path:
+    """A new temporary folder in ``directory`` with a name :func:`remove_stale_temps` knows."""
+    d = Path(directory)
+    while True:
+        tmp = d / f".apygis-{os.getpid()}-{secrets.token_hex(4)}.tmp"
+        try:
+            tmp.mkdir(mode=0o700)
+            return tmp
+        except FileExistsError:  # pragma: no cover - 32 random bits
+            continue
 
 
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def _fsync_dir(d: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(d, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _write_file(path: Path, data: bytes, target) -> None:
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666 & ~_umask())
+    except OSError as exc:
+        raise write_failed(target, exc) from None
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+        raise write_failed(target, exc) from None
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def atomic_write_many(
+    contents: dict, stamp=None, *, complete: bool = True, remove: Iterable = ()
+) -> list[Path]:
+    """Write several files so that none is ever half-written.
+
+    Parameters
+    ----------
+    contents : dict of path -> bytes
+        The files to write.
+    stamp : path, optional
+        The set stamp of a multi-file set (``NAME.apyset``). With
+        ``complete`` (the whole set is written), the stamp lists exactly these
+        files; otherwise (some files of a set are replaced) an existing stamp
+        is updated for them, and none is made where there was none.
+    remove : iterable of path
+        Files of the set that the new set no longer has; removed after the
+        renames (the stamp, written first, no longer lists them).
+
+    Returns
+    -------
+    list of Path
+        The targets, as given.
+    """
+    pairs = []
+    made: list[Path] = []
+    entries = {}
+    try:
+        for target, data in contents.items():
+            target = Path(target)
+            real = check_target(target)
+            try:
+                real.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise write_failed(target, exc) from None
+            remove_stale_temps(real.parent, [real.name])
+            tmp = _temp_name(real)
+            _write_file(tmp, data, target)
+            made.append(tmp)
+            pairs.append((tmp, real, target))
+            entries[target.name] = _entry(data)
+        commit(pairs, stamp, entries, complete=complete, remove=remove)
+    except BaseException:
+        for tmp in made:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+        raise
+    return [Path(t) for t in contents]
+
+
+def _entry(data: bytes) -> dict:
+    return {"size": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+
+
+def _file_entry(path: Path) -> dict:
+    h = hashlib.sha256()
+    size = 0
+    with open(path, "rb") as fh:
+        while chunk := fh.read(1 << 20):
+            h.update(chunk)
+            size += len(chunk)
+    return {"size": size, "sha256": h.hexdigest()}
+
+
+def stamp_entries(files: dict) -> dict:
+    """Stamp entries ``{name: {size, sha256}}`` of files on disk (``{name: path}``)."""
+    return {name: _file_entry(Path(p)) for name, p in files.items()}
+
+
+def commit(
+    pairs: list,
+    stamp=None,
+    entries: dict | None = None,
+    *,
+    complete: bool = True,
+    remove: Iterable = (),
+) -> None:
+    """Rename written temporary files over their targets, stamping the set first.
+
+    ``pairs`` are ``(temporary file, real target, target as named)``; the
+    temporary files are complete and synced. ``entries`` are the stamp entries
+    of the new files (by name). Any ``OSError`` is a :class:`WriteError`
+    naming the target; one during the renames also says the set is now
+    inconsistent (the stamp tells a reader so).
+    """
+    stamp_path = None
+    remove = [Path(p) for p in remove]
+    if stamp is not None:
+        stamp_path = check_target(stamp)
+        old = _read_stamp(stamp_path) if stamp_path.exists() else None
+        if complete or old is not None:
+            files = {} if complete or old is None else dict(old.get("files", {}))
+            for p in remove:
+                files.pop(p.name, None)
+            files.update(entries or {})
+            # what each touched file is now (null: none), so that a reader can tell
+            # the files this write replaced from those it did not get to
+            before = {}
+            for real in [real for _, real, _ in pairs] + remove:
+                try:
+                    before[real.name] = _file_entry(real) if real.is_file() else None
+                except OSError:
+                    before[real.name] = None
+            _write_stamp(stamp_path, files, before, Path(stamp))
+        else:
+            stamp_path = None
+    for done, (tmp, real, target) in enumerate(pairs):
+        try:
+            os.replace(tmp, real)
+        except OSError as exc:
+            err = write_failed(target, exc)
+            if done and stamp_path is not None:
+                err = WriteError(
+                    f"{err}; {done} of {len(pairs)} files of the set were replaced, so "
+                    f"{stamp_path.name} now marks the set as incomplete: write it again"
+                )
+            raise err from None
+    for p in remove:
+        if p.is_file() and all(p != real for _, real, _ in pairs):
+            log.info("removing %s: not part of the set just written", p)
+            try:
+                os.unlink(p)
+            except OSError as exc:
+                raise write_failed(p, exc, "cannot remove the old file") from None
+    for d in {real.parent for _, real, _ in pairs}:
+        _fsync_dir(d)
+
+
+def _write_stamp(real: Path, files: dict, before: dict, named: Path) -> None:
+    doc = {
+        "format": STAMP_FORMAT,
+        "version": 1,
+        "write_id": secrets.token_hex(8),
+        "written": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "files": dict(sorted(files.items())),
+        "before": dict(sorted(before.items())),
+    }
+    data = (json.dumps(doc, indent=1) + "\n").encode("utf-8")
+    remove_stale_temps(real.parent, [real.name])
+    tmp = _temp_name(real)
+    _write_file(tmp, data, named)
+    try:
+        os.replace(tmp, real)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise write_failed(named, exc) from None
+    _fsync_dir(real.parent)
+
+
+def _read_stamp(path: Path) -> dict:
+    try:
+        doc = json.loads(read_bytes(path))
+    except (ValueError, UnicodeDecodeError):
+        doc = None
+    if (
+        not isinstance(doc, dict)
+        or doc.get("format") != STAMP_FORMAT
+        or not isinstance(doc.get("files"), dict)
+        or not isinstance(doc.get("before", {}), dict)
+    ):
+        raise FormatError(
+            "not an apygis set stamp (JSON with format apygis-set and files); "
+            "delete it to read the files of the set as they are",
+            path=path,
+        )
+    return doc
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def verify_set(stamp, members: Iterable, complete: bool = True) -> None:
+    """Refuse a set that an interrupted write left part new, part old.
+
+    The stamp lists the files of the set as the last write made them and as
+    they were before it (``before``: the files it replaced or removed; null
+    for one that did not exist). Each file of the set is new (as listed), old
+    (as before) or neither (changed since by another program: left to the
+    reader). A set with both new and old files was left half-replaced by a
+    write that was killed or failed during its renames.
+
+    Parameters
+    ----------
+    stamp : path
+        ``.NAME.apyset``; without one there is nothing to check.
+    members : iterable of path
+        The files a reader takes as the set.
+    complete : bool
+        False when one file of the set is read: one file is always whole
+        (it was renamed into place in one step), so nothing is checked.
+
+    Raises
+    ------
+    FormatError
+        Naming the files that are new and those that are still old.
+    """
+    stamp = Path(stamp)
+    if not complete or not stamp.is_file():
+        return
+    doc = _read_stamp(stamp)
+    files: dict = doc["files"]
+    before: dict = doc.get("before", {})
+    folder = stamp.parent
+    names = set(files) | set(before) | {Path(p).name for p in members}
+    new, old = [], []
+    for name in sorted(names):
+        p = folder / name
+        cur = _Current(p)
+        is_new = cur.matches(files.get(name))
+        is_old = cur.matches(before[name]) if name in before else is_new
+        if is_new and not is_old:
+            new.append(name)
+        elif is_old and not is_new:
+            old.append(name)
+        elif not is_new:
+            log.debug("%s: neither as written at %s nor as before", p, doc.get("written"))
+    if new and old:
+        raise FormatError(
+            f"the write of {doc.get('written', '?')} was interrupted: {_names(new)} "
+            f"{'is' if len(new) == 1 else 'are'} new, but {_names(old)} "
+            f"{'is' if len(old) == 1 else 'are'} still as before (old, or missing), so the "
+            "files do not make one map; write the set again (or delete "
+            f"{stamp.name} to read the files as they are)",
+            path=stamp,
+        )
+
+
+class _Current:
+    """A file as it is now, hashed only when its size matches."""
+
+    def __init__(self, p: Path):
+        self.p = p
+        try:
+            self.size = os.stat(p).st_size if p.is_file() else None
+        except OSError:
+            self.size = None
+        self._hash = None
+
+    def matches(self, e: dict | None) -> bool:
+        if e is None or self.size is None:
+            return e is None and self.size is None
+        if not isinstance(e, dict) or e.get("size") != self.size:
+            return False
+        if self._hash is None:
+            try:
+                self._hash = _file_entry(self.p)["sha256"]
+            except OSError:
+                return False
+        return self._hash == e.get("sha256")
+
+
+def _names(names: list[str]) -> str:
+    names = sorted(set(names))
+    return ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
 
 
 def read_bytes(path) -> bytes:
@@ -60,3 +529,86 @@ def read_bytes(path) -> bytes:
         raise FormatError("no such file", path=path) from None
     except OSError as exc:
         raise FormatError(f"cannot read: {exc.strerror}", path=path) from None
+
+
+# --------------------------------------------------------------------------- CRS units
+
+
+def crs_unit(crs) -> tuple[str, float, bool]:
+    """``(unit name, metres per unit, geographic)`` of a CRS's first (X) axis.
+
+    For angular units the metres are those of an arc of one unit along the
+    equator (111.3 km for a degree on WGS 84).
+
+    >>> crs_unit("EPSG:2056")
+    ('metre', 1.0, False)
+    >>> name, m, geo = crs_unit("EPSG:4326"); name, round(m), geo
+    ('degree', 111319, True)
+    """
+    from pyproj import CRS
+
+    c = crs if isinstance(crs, CRS) else CRS.from_user_input(crs)
+    axes = c.axis_info
+    if not axes:
+        return "metre", 1.0, False
+    ax = axes[0]
+    factor = float(ax.unit_conversion_factor or 1.0)
+    if c.is_geographic or ax.unit_name in ("degree", "radian", "grad", "arc-second"):
+        ell = c.ellipsoid
+        a = float(ell.semi_major_metre) if ell is not None else 6378137.0
+        return ax.unit_name, a * factor, True
+    return ax.unit_name, factor, False
+
+
+def metres_per_unit(crs) -> float:
+    """Metres of one CRS unit (1 for metres, 0.3048 for feet, ~111 km for a degree)."""
+    return crs_unit(crs)[1]
+
+
+_SYMBOL = {"degree": "°", "metre": " m", "foot": " ft", "US survey foot": " ftUS"}
+
+
+def _length(m: float) -> str:
+    if m >= 1000:
+        return f"{m / 1000:.3g} km"
+    if m >= 1:
+        return f"{m:.3g} m"
+    return f"{m * 100:.3g} cm"
+
+
+def check_resolution(map_, path, step: float, what: str, limit_m: float = 0.01) -> None:
+    """Refuse a map whose CRS unit makes ``step`` (in CRS units) coarser than ``limit_m``.
+
+    ``what`` says how the format stores coordinates ("APY ASCII stores
+    coordinates in hundredths of a unit"). A map without a CRS is taken to be
+    in metres, as apygis's model is.
+    """
+    crs = getattr(map_, "crs", None)
+    if crs is None:
+        return
+    name, m_per_unit, geographic = crs_unit(crs)
+    lost = step * m_per_unit
+    if lost <= limit_m * (1 + 1e-9):
+        return
+    from apygis.model.map import crs_string
+
+    unit = "degrees" if name == "degree" else f"{name}s"
+    sym = _SYMBOL.get(name, f" {name}")
+    step_txt = f"{step:g}{sym}"
+    hint = "choose a projected CRS" if geographic else "choose a CRS in metres or feet"
+    raise FormatError(
+        f"{what}; {crs_string(crs)} is in {unit}, so {step_txt} ≈ {_length(lost)} "
+        f"would be lost: {hint}",
+        path=path,
+    )
+
+
+def significant_step(values, digits: int) -> float:
+    """The step of ``digits`` significant decimal digits at the largest ``|value|``."""
+    import numpy as np
+
+    v = np.asarray(values, dtype=np.float64)
+    top = float(np.abs(v).max()) if v.size else 0.0
+    if not math.isfinite(top) or top == 0.0:
+        return 0.0
+    return 10.0 ** (math.floor(math.log10(top)) - (digits - 1))

@@ -39,7 +39,7 @@ from apygis.formats._apycommon import (
     encode_latin1,
     m_to_cm,
 )
-from apygis.formats._io import STAMP_SUFFIX, atomic_write_many, check_resolution, read_bytes
+from apygis.formats._io import atomic_write_many, check_resolution, read_bytes, stamp_path
 from apygis.formats._readguard import check_coords, loads_json
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, crs_string
 from apygis.model.records import (
@@ -343,7 +343,7 @@ def _split_target(map_: MapFile, path) -> tuple[Path, list[Layer], bool]:
 
 
 def _stamp(base: Path) -> Path:
-    return base.with_name(base.name + STAMP_SUFFIX)
+    return stamp_path(base)
 
 
 def members(path) -> tuple[Path, list[Path], bool]:

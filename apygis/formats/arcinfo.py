@@ -58,11 +58,11 @@ import numpy as np
 from apygis.errors import DriverError, FormatError, RecordError, ValueRangeError
 from apygis.formats import Driver
 from apygis.formats._io import (
-    STAMP_SUFFIX,
     atomic_write_many,
     check_resolution,
     metres_per_unit,
     read_bytes,
+    stamp_path,
 )
 from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows
 from apygis.model import topology
@@ -441,7 +441,7 @@ def members(path) -> tuple[Path, list[Path], bool] | None:
     """The set stamp and the files of the set a read of ``path`` takes."""
     p = Path(path)
     base = p.with_suffix("") if p.suffix.lower() == ".gen" else p
-    stamp = base.with_name(base.name + STAMP_SUFFIX)
+    stamp = stamp_path(base)
     if p.is_file():
         return stamp, [p, *[c for c in [p.with_suffix(".csv")] if c.is_file()]], False
     files = []
@@ -497,7 +497,7 @@ def write(
     for f in stale:
         log.info("removing %s: the map no longer has these records", f)
     written = atomic_write_many(
-        contents, base.with_name(base.name + STAMP_SUFFIX), complete=True, remove=stale
+        contents, stamp_path(base), complete=True, remove=stale
     )
     if progress:
         progress(2, 2)

@@ -100,16 +100,18 @@ def convert_file(
     the first half, writing the second (for drivers that report progress).
     """
     import apygis
-    from apygis.formats import driver_for, get_driver
+    from apygis.formats import driver_for, get_driver, verify_set
 
     def phase(offset):
         if progress is None:
             return {}
         return {"progress": lambda done, total: progress(offset + 0.5 * done / max(total, 1))}
 
+    writing = False
     try:
         in_drv = get_driver(src_driver, "r") if src_driver else driver_for(src, "r")
         opts = {**(read_options or {}), **phase(0.0)}
+        verify_set(in_drv, src)  # a set half-replaced by an interrupted write is refused
         m = in_drv.reader(os.fspath(src), **_accepted(in_drv.reader, opts))
         if to_crs is not None:
             from apygis.model.transform import reproject
@@ -130,14 +132,20 @@ def convert_file(
                 )
                 verb = "exists" if len(existing) == 1 else "exist"
                 raise FileOverwriteError(f"{what} {verb}; use --overwrite")
+        writing = True
         written = apygis.write(m, dst, driver=out_drv.name, **_accepted(out_drv.writer, phase(0.5)))
         if progress is not None:
             progress(1.0)
         return Result(src, [str(p) for p in written], sum(len(lay) for lay in m), len(m.layers))
     except ApygisError as exc:
         return Result(src, error=str(exc))
-    except OSError as exc:
-        return Result(src, error=f"{exc.strerror or exc}: {exc.filename or src}")
+    except OSError as exc:  # name the file the error is about: the target once writing
+        from apygis.formats._io import write_failed
+
+        if writing:
+            return Result(src, error=str(write_failed(dst, exc)))
+        reason = (exc.strerror or str(exc)).lower()
+        return Result(src, error=f"{exc.filename or src}: cannot read: {reason}")
 
 
 def convert_many(

@@ -43,7 +43,6 @@ import re
 import shutil
 import string
 import struct
-import tempfile
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -51,8 +50,17 @@ from pathlib import Path
 
 import numpy as np
 
-from apygis.errors import DriverError, FormatError
+from apygis.errors import DriverError, FormatError, WriteError
 from apygis.formats import Driver
+from apygis.formats._io import (
+    check_target,
+    commit,
+    make_temp_dir,
+    remove_stale_temps,
+    stamp_entries,
+    stamp_path,
+    write_failed,
+)
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
 from apygis.model.records import (
     LINE_DTYPE,
@@ -580,40 +588,83 @@ def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = 
             raise DriverError(f"{directory}: is a file; {fmt.ogr} writes into a directory")
     tables = _tables(map_, fmt, crs)
     names = {} if fmt.multi else {t.name: _file_names(t, fmt, prefix, ext, crs) for t in tables}
-    directory.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".apygis-", suffix=".tmp", dir=directory))
+    if fmt.multi:
+        real = check_target(target)  # a regular file or none; a symlink is written through
+        directory = real.parent
+    else:
+        for ns in names.values():
+            for n in ns:
+                check_target(directory / n)
     try:
-        with _sqlite_unsynced(fmt):
-            _write_tables(
-                tmp, fmt, tables, names, target.name if fmt.multi else None, crs, progress
-            )
-        if fmt.multi:
-            _fsync(tmp / target.name)
-            os.replace(tmp / target.name, target)
-            return [target]
-        made = sorted(p.name for p in tmp.iterdir())
-        expected = sorted(n for ns in names.values() for n in ns)
-        if made != expected:  # pragma: no cover - a GDAL that writes other side files
-            log.warning("%s: GDAL wrote %s, expected %s", directory, made, expected)
-        for name in made:
-            _fsync(tmp / name)
-        written = []
-        for name in made:
-            os.replace(tmp / name, directory / name)
-            written.append(directory / name)
-        _remove_stale(directory, prefix, fmt, set(made))
-        return written
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise write_failed(directory, exc) from None
+    remove_stale_temps(directory, [])  # only folders: OGR writes into one
+    try:
+        tmp = make_temp_dir(directory)
+    except OSError as exc:
+        raise write_failed(target if fmt.multi else directory, exc) from None
+    try:
+        try:
+            with _sqlite_unsynced(fmt):
+                _write_tables(
+                    tmp,
+                    fmt,
+                    tables,
+                    names,
+                    target.name if fmt.multi else None,
+                    crs,
+                    progress,
+                    target.parent if fmt.multi else directory,
+                )
+            if fmt.multi:
+                _fsync(tmp / target.name)
+                commit([(tmp / target.name, real, target)])
+                return [target]
+            made = sorted(p.name for p in tmp.iterdir())
+            expected = sorted(n for ns in names.values() for n in ns)
+            if made != expected:  # pragma: no cover - a GDAL that writes other side files
+                log.warning("%s: GDAL wrote %s, expected %s", directory, made, expected)
+            for name in made:
+                _fsync(tmp / name)
+        except OSError as exc:
+            raise write_failed(target if fmt.multi else directory, exc) from None
+        except DriverError as exc:  # GDAL's own message; a full disk gives odd SQLite errors
+            if _disk_full(tmp):
+                raise WriteError(
+                    f"{target if fmt.multi else directory}: cannot write: "
+                    "no space left on device"
+                ) from None
+            raise exc from None
+        pairs = [(tmp / n, check_target(directory / n), directory / n) for n in made]
+        entries = stamp_entries({n: tmp / n for n in made})
+        stale = _stale(directory, prefix, fmt, set(made))
+        commit(pairs, stamp_path(directory / prefix), entries, remove=stale)
+        return [directory / n for n in made]
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _write_tables(tmp: Path, fmt: _Format, tables, names, single: str | None, crs, progress):
+def _disk_full(p: Path) -> bool:
+    """True when the file system of ``p`` has (almost) no space left."""
+    try:
+        st = os.statvfs(p)
+    except OSError:
+        return False
+    return st.f_bavail * st.f_frsize < 64 * 1024
+
+
+def _write_tables(
+    tmp: Path, fmt: _Format, tables, names, single: str | None, crs, progress, final: Path
+):
     for k, table in enumerate(tables):
-        dest = tmp / (single if single is not None else names[table.name][0])
+        name = single if single is not None else names[table.name][0]
+        dest = tmp / name
         try:
             _write_table(dest, fmt, table, crs)
-        except _WriteError as exc:
-            raise DriverError(str(exc)) from None
+        except _WriteError as exc:  # named by the target, not the temporary folder
+            where = ": ".join(x for x in (str(final / name), exc.record) if x)
+            raise DriverError(f"{where}: {exc.reason}") from None
         if progress:
             progress(k + 1, len(tables))
 
@@ -646,22 +697,51 @@ def _fsync(p: Path) -> None:
         os.fsync(fh.fileno())
 
 
-def _remove_stale(directory: Path, prefix: str, fmt: _Format, written: set[str]) -> None:
-    """Remove files of this prefix's schema that the write did not produce.
+def _stale(directory: Path, prefix: str, fmt: _Format, written: set[str]) -> list[Path]:
+    """Files of this prefix's schema that the write did not produce (to be removed).
 
     They would be read back as part of the map: an OGR layer the map no
     longer has, a ``.prj`` left from a map that had a CRS, a stale spatial
     index. Only names of the schema with this prefix are touched.
     """
+    return [p for p in _schema_files(directory, prefix, fmt) if p.name not in written]
+
+
+def _schema_files(directory: Path, prefix: str | None, fmt: _Format) -> list[Path]:
+    """Every file of the schema in ``directory`` with this prefix (any prefix: None)."""
     kinds = _SHP_SIDECARS if fmt is _SHP else fmt.extensions
+    out = []
     for p in sorted(directory.iterdir()):
         stem, _, suffix = p.name.rpartition(".")
-        if not stem or suffix.lower() not in kinds or p.name in written or not p.is_file():
+        if not stem or suffix.lower() not in kinds or not p.is_file():
             continue
         parsed = _parse_name(stem)
-        if parsed is not None and parsed[0] == prefix:
-            log.info("removing %s: not part of the map just written", p)
-            p.unlink()
+        if parsed is not None and (prefix is None or parsed[0] == prefix):
+            out.append(p)
+    return out
+
+
+def members(path, fmt) -> tuple[Path, list[Path], bool] | None:
+    """The set stamp and the files a read of ``path`` takes (folder formats only)."""
+    fmt = _fmt(fmt)
+    if fmt.multi:
+        return None
+    p = Path(path)
+    if p.is_file():
+        parsed = _parse_name(p.stem)
+        if parsed is None or parsed[0] is None:
+            return None
+        return stamp_path(p.parent / parsed[0]), [p], False
+    if p.is_dir():
+        files = _schema_files(p, None, fmt)
+        prefixes = {parsed[0] for f in files if (parsed := _parse_name(f.stem))}
+        if len(prefixes) != 1 or None in prefixes:
+            return None  # the reader refuses several maps; no prefix: not apygis's set
+        return stamp_path(p / prefixes.pop()), files, True
+    if p.suffix[1:].lower() in fmt.extensions and p.parent.is_dir():
+        files = _schema_files(p.parent, p.stem, fmt)
+        return stamp_path(p.parent / p.stem), files, True
+    return None
 
 
 # --------------------------------------------------------------------------- reading: sources
@@ -902,17 +982,37 @@ def _require(columns: dict, names, src: _Source) -> list:
     return out
 
 
-def _exact_table(kind: str, wkb, columns: dict, src: _Source) -> np.ndarray:
-    """An apygis table (symbols, texts, line_points) from its OGR layer, record for record."""
+def _exact_table(
+    kind: str,
+    wkb,
+    columns: dict,
+    src: _Source,
+    default_code: int = 0,
+    report: _EditReport | None = None,
+) -> np.ndarray:
+    """An apygis table (symbols, texts, line_points) from its OGR layer, record for record.
+
+    In ``L_symbols`` and ``L_texts`` a feature with ``num`` NULL (drawn in a
+    GIS) gets a new number, a NULL code there ``default_code``; a number used
+    by an earlier feature too (a feature copied in a GIS) stays with the
+    earlier one, the later gets a new number. Both go to ``report``.
+    """
     if wkb is None:
         raise FormatError("the layer has no geometry", src.dataset, _rec(src.name))
     xyz = _point_coords(wkb, src.dataset, src.name)
+    plain = kind != "line_points"
     if kind == "symbols":
         num, code = _require(columns, ("num", "code"), src)
+        new = _null_mask(num)
+        null_code = _null_mask(code) & new
+        if null_code.any():
+            code = np.asarray(code, dtype=object).copy()
+            code[null_code] = default_code
         t = np.zeros(len(xyz), SYMBOL_DTYPE)
         t["code"] = _codes(code, "code", src)
     elif kind == "texts":
         num, text = _require(columns, ("num", "text"), src)
+        new = _null_mask(num)
         t = np.zeros(len(xyz), TEXT_DTYPE)
         t["text"] = _texts(text, "text", src)
     else:
@@ -921,9 +1021,295 @@ def _exact_table(kind: str, wkb, columns: dict, src: _Source) -> np.ndarray:
         t["code"] = _codes(code, "code", src)
         for r, col in zip(REF_FIELDS, refs, strict=True):
             t[r] = _int_column(col, r, src, nullable=True)
-    t["num"] = _int_column(num, "num", src)
+    nums = _int_column(num, "num", src, nullable=plain)
+    if plain:
+        _number_new(nums, new, src, report)
+    t["num"] = nums
     t["x"], t["y"], t["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
     return t
+
+
+def _number_new(nums: np.ndarray, new: np.ndarray, src: _Source, report) -> None:
+    """Number (in place) features without a number and later copies of a number in use."""
+    from apygis.model.map import _allocate
+
+    word = "symbol" if src.name.endswith("symbols") else "text"
+    if new.any():
+        nums[new] = _allocate(nums[~new], int(new.sum()))
+        if report is not None:
+            report.add(src.name, int(new.sum()), word, "added", _numbered(nums[new]))
+    order = np.argsort(nums, kind="stable")
+    repeat = np.zeros(len(nums), dtype=bool)
+    repeat[order[1:]] = nums[order][1:] == nums[order][:-1]
+    if repeat.any():
+        old = nums[repeat].copy()
+        nums[repeat] = _allocate(nums, int(repeat.sum()))
+        if report is not None:
+            shown = zip(old[:5], nums[repeat][:5], strict=True)
+            pairs = ", ".join(f"{a} -> {b}" for a, b in shown)
+            more = ", ..." if len(old) > 5 else ""
+            report.add(
+                src.name,
+                int(repeat.sum()),
+                word,
+                f"renumbered (a number an earlier feature has: {pairs}{more})",
+            )
+
+
+def _numbered(nums: np.ndarray) -> str:
+    shown = ", ".join(str(int(v)) for v in nums[:5])
+    return f"numbered {shown}{', ...' if len(nums) > 5 else ''}"
+
+
+# --------------------------------------------------------------------------- reading: edits
+
+
+@dataclass
+class _EditReport:
+    """What a read took from a GIS user's edits of one map layer; logged as one message."""
+
+    parts: dict = field(default_factory=dict)  # OGR layer name (or "") -> phrases
+
+    def add(self, source: str, n: int, noun: str, how: str, detail: str = "") -> None:
+        if n:
+            words = f"{n} {noun if n == 1 else noun + 's'} {how}"
+            self.parts.setdefault(source, []).append(f"{words} ({detail})" if detail else words)
+
+    def message(self) -> str:
+        return "; ".join(
+            ", ".join(ph) + (f" (from {src})" if src else "") for src, ph in self.parts.items()
+        )
+
+
+# agreement of a line feature's vertices with its line points: float64 noise, no more
+_AGREE_RTOL, _AGREE_ATOL = 1e-12, 1e-9
+
+
+def _parse_points(value, k: int, src: _Source) -> tuple[tuple[int, ...], bool]:
+    """The point numbers of a ``points`` value and whether it was cut (``,...``)."""
+    if not isinstance(value, str):
+        value = str(value)
+    s = value.strip()
+    cut = s.endswith("...")
+    if cut:
+        s = s[:-3].rstrip().rstrip(",")
+    try:
+        nums = tuple(int(v) for v in s.split(","))
+    except ValueError:
+        raise FormatError(
+            f"feature {k + 1}: field points is {value!r}, expected point numbers like "
+            "'12,13,14' (or NULL for a new line)",
+            src.dataset,
+            _rec(src.name),
+        ) from None
+    return nums, cut
+
+
+def _line_edits(
+    lp: np.ndarray, ext: str, feats: dict, opts: dict, acc: _Foreign, report: _EditReport
+) -> tuple[np.ndarray, list]:
+    """Take the edits of ``L_lines`` / ``L_areas`` against ``L_line_points``.
+
+    ``feats`` maps ``"lines"`` / ``"areas"`` to ``(wkb, columns, source)``.
+    A feature whose ``points`` name a line of ``lp`` and whose code and
+    vertices agree with it keeps that line's rows; the rows of lines whose
+    feature is gone or differs are dropped; changed and new features go to
+    ``acc`` (rebuilt by ``add_lines``). Returns the rows kept and the branch
+    ends whose junction was dropped: ``(num, "fwd" | "back", junction xyz)``.
+    """
+    from apygis.model.build import export_lines
+
+    ls = export_lines(Layer.from_arrays(ext, line_points=lp))
+    lengths = np.diff(ls.offsets)
+    texts = _points_text(ls.nums, ls.offsets, None)
+    has_feature = {"lines": ~ls.closed & (lengths >= 2), "areas": ls.closed.copy()}
+    covered = np.zeros(len(ls), dtype=bool)
+    kept = np.zeros(len(ls), dtype=bool)
+    claimed = np.zeros(len(ls), dtype=bool)
+    replaced = np.zeros(len(ls), dtype=bool)
+    line_of = np.repeat(np.arange(len(ls)), lengths)
+    own_num_line = {int(v): int(k) for v, k in zip(ls.nums[ls.own], line_of[ls.own], strict=True)}
+    later = []  # (kind, feature, nums): features whose points name no line of lp exactly
+    for kind in ("lines", "areas"):
+        if kind not in feats:  # no such OGR layer: those lines stay as lp has them
+            continue
+        wkb, columns, src = feats[kind]
+        if wkb is None:
+            raise FormatError("the layer has no geometry", src.dataset, _rec(src.name))
+        idx = np.flatnonzero(has_feature[kind])
+        covered[idx] = True
+        by_text = {texts[k]: int(k) for k in idx}
+        by_first: dict[int, list[int]] = {}
+        geoms = np.asarray(_from_wkb(wkb, src.dataset, src.name), dtype=object)
+        pcol = _field(columns, "points")
+        if pcol is None:
+            log.warning(
+                "%s: layer %s has no field points: its features are taken as new lines",
+                src.dataset,
+                src.name,
+            )
+        ccol = _field(columns, opts["code_field"] or "code")
+        codes = (
+            _int_column(ccol, "code", src, nullable=True)
+            if ccol is not None
+            else np.full(len(geoms), NO_REF)
+        )
+        if ccol is not None:
+            codes = np.where(_null_mask(ccol), NO_REF, codes)
+        take = np.zeros(len(geoms), dtype=bool)
+        empty = np.array([g is None or g.is_empty for g in geoms], dtype=bool)
+        report.add(src.name, int(empty.sum()), "feature", "without geometry skipped")
+        n_changed = n_added = 0
+        for i in np.flatnonzero(~empty):
+            v = None if pcol is None else pcol[i]
+            if v is None or (isinstance(v, str) and not v.strip()):
+                take[i] = True
+                n_added += 1
+                continue
+            k = by_text.get(v) if isinstance(v, str) else None
+            if k is None:
+                nums, cut = _parse_points(v, int(i), src)
+                if cut:
+                    if not by_first:
+                        for j in idx:
+                            by_first.setdefault(int(ls.nums[ls.offsets[j]]), []).append(int(j))
+                    k = next(
+                        (
+                            j
+                            for j in by_first.get(nums[0], [])
+                            if tuple(ls.nums[ls.offsets[j] : ls.offsets[j] + len(nums)]) == nums
+                        ),
+                        None,
+                    )
+                else:
+                    k = by_text.get(",".join(map(str, nums)))
+                if k is None:
+                    later.append((kind, src, int(i), nums))
+                    take[i] = True
+                    continue
+            if claimed[k]:  # a copy of a feature: a new line
+                take[i] = True
+                n_added += 1
+                continue
+            claimed[k] = True
+            a, b = ls.offsets[k], ls.offsets[k + 1]
+            if codes[i] == ls.codes[k] and _agrees(geoms[i], ls.coords[a:b], kind == "areas"):
+                kept[k] = True
+            else:
+                take[i] = True
+                n_changed += 1
+        if take.any():
+            sub = np.array(wkb, dtype=object)
+            sub[~take] = None
+            _foreign_layer(sub, columns, src, acc, opts)
+        report.add(src.name, n_changed, kind[:-1], "changed (topology rebuilt)")
+        report.add(src.name, n_added, kind[:-1], "added")
+    # points that name no line of lp exactly: a change where they name line points of a
+    # line that is not kept, else new
+    for kind, src, _i, nums in later:
+        hit = {own_num_line[v] for v in nums if v in own_num_line}
+        hit = [k for k in hit if covered[k] and not kept[k]]
+        replaced[hit] = True
+        word = "changed (topology rebuilt)" if hit else "added"
+        report.add(src.name, 1, kind[:-1], word)
+    drop_line = covered & ~kept
+    gone = covered & ~claimed & ~replaced
+    for kind in ("lines", "areas"):
+        if kind in feats:
+            n = int((gone & has_feature[kind]).sum())
+            report.add(feats[kind][2].name, n, kind[:-1], "deleted")
+    if not drop_line.any():
+        return lp, []
+
+    drop = np.zeros(len(lp), dtype=bool)
+    drop[ls.rows[ls.own & drop_line[line_of]]] = True
+    out = lp[~drop].copy()
+    dropped = np.setdiff1d(lp["num"][drop], out["num"])
+    where = {int(v): r for r, v in enumerate(lp["num"]) if drop[r]}
+    relinks = []
+    for ref in REF_FIELDS:
+        hit = np.isin(out[ref], dropped)
+        if ref in ("fwd", "back"):
+            for r in np.flatnonzero(hit):
+                j = where[int(out[ref][r])]
+                if out["num"][r] in (lp["side1"][j], lp["side2"][j]):  # a branch end
+                    relinks.append((int(out["num"][r]), ref, _xyz(lp[j : j + 1])[0]))
+        out[ref][hit] = NO_REF
+    return out, relinks
+
+
+def _agrees(geom, coords: np.ndarray, closed: bool) -> bool:
+    """Whether a feature's geometry has exactly the vertices ``coords`` (a ring: either way)."""
+    import shapely
+
+    tid = shapely.get_type_id(geom)
+    if closed:
+        if tid != 3 or shapely.get_num_interior_rings(geom) != 0:
+            return False
+        got = shapely.get_coordinates(shapely.get_exterior_ring(geom), include_z=True)
+        if len(got) != len(coords) + 1:
+            return False
+        ring = np.r_[coords, coords[:1]]
+        return _close(got, ring) or _close(got[::-1], ring)
+    if tid not in (1, 2):
+        return False
+    got = shapely.get_coordinates(geom, include_z=True)
+    return len(got) == len(coords) and _close(got, coords)
+
+
+def _close(a: np.ndarray, b: np.ndarray) -> bool:
+    return bool(np.isclose(a, b, rtol=_AGREE_RTOL, atol=_AGREE_ATOL).all())
+
+
+def _relink(lay: Layer, relinks: list, report: _EditReport) -> Layer:
+    """Join branch ends whose junction was dropped to a line point where it was.
+
+    A line point at the junction's place (within float64 noise) with a free
+    side reference takes the end as its branch (a rebuilt line's vertex);
+    where there is none, the end grows a new line point there, so the line
+    still reaches it as the GIS user saw it.
+    """
+    from apygis.model.map import _allocate
+
+    lp = lay.line_points.copy()
+    base = len(lp)
+    extra = []
+    joined = grown = 0
+    for num, ref, xyz in relinks:
+        r = int(np.flatnonzero(lp["num"] == num)[0])
+        here = (
+            np.isclose(lp["x"], xyz[0], rtol=_AGREE_RTOL, atol=_AGREE_ATOL)
+            & np.isclose(lp["y"], xyz[1], rtol=_AGREE_RTOL, atol=_AGREE_ATOL)
+            & (np.arange(len(lp)) != r)
+            & (np.arange(len(lp)) < base)
+        )
+        has_me = here & ((lp["side1"] == num) | (lp["side2"] == num))
+        free = here & ((lp["side1"] == NO_REF) | (lp["side2"] == NO_REF))
+        cands = np.flatnonzero(has_me) if has_me.any() else np.flatnonzero(free)
+        if len(cands):
+            t = int(cands[0])
+            lp[ref][r] = lp["num"][t]
+            if not has_me.any():
+                side = "side1" if lp["side1"][t] == NO_REF else "side2"
+                lp[side][t] = num
+            joined += 1
+            continue
+        q = int(_allocate(np.r_[lp["num"], [e["num"] for e in extra]].astype(np.int64), 1)[0])
+        row = np.zeros(1, LINE_DTYPE)[0]
+        row["num"] = q
+        row["x"], row["y"], row["z"] = xyz
+        row["code"] = lp["code"][r]
+        row["fwd"] = num if ref == "back" else NO_REF
+        row["back"] = num if ref == "fwd" else NO_REF
+        row["side1"] = row["side2"] = NO_REF
+        lp[ref][r] = q
+        extra.append(row)
+        grown += 1
+    if extra:
+        lp = np.concatenate([lp, np.array(extra, dtype=LINE_DTYPE)])
+    report.add("", joined, "branch end", "joined again to its rebuilt junction")
+    report.add("", grown, "branch end", "given a new line point where its junction was")
+    return Layer.from_arrays(lay.ext, lay.symbols, lp, lay.texts)
 
 
 # --------------------------------------------------------------------------- reading: foreign
@@ -1211,9 +1597,9 @@ def read(
         if parsed:
             prefixes.add(parsed[0])
         plan.append((src, ext, kind))
-    # L_lines and L_areas derive from L_line_points: not read where that is in the file
+    # L_lines and L_areas of a map layer with L_line_points are checked against it: a GIS
+    # user's edits of them are taken (_line_edits), the rest keeps its exact topology
     exact_lines = {ext for _, ext, kind in plan if kind == "line_points"}
-    plan = [p for p in plan if not (p[2] in ("lines", "areas") and p[1] in exact_lines)]
 
     header = None
     total = len(plan) + (header_src is not None)
@@ -1227,6 +1613,8 @@ def read(
 
     exact: dict[str, dict[str, np.ndarray]] = {}
     foreign: dict[str, _Foreign] = {}
+    edited: dict[str, dict[str, tuple]] = {}  # ext -> kind -> (wkb, columns, source)
+    reports: dict[str, _EditReport] = {}
     order: list[str] = list(header["layers"]) if header else []
     layer_crs = None
     for src, ext, kind in plan:
@@ -1241,7 +1629,15 @@ def read(
                 raise FormatError(
                     f"a second {kind} layer for map layer {ext}", src.dataset, _rec(src.name)
                 )
-            tables[kind] = _exact_table(kind, wkb, columns, src)
+            report = reports.setdefault(ext, _EditReport())
+            tables[kind] = _exact_table(kind, wkb, columns, src, opts["default_code"], report)
+        elif kind in ("lines", "areas") and ext in exact_lines:
+            kinds = edited.setdefault(ext, {})
+            if kind in kinds:
+                raise FormatError(
+                    f"a second {kind} layer for map layer {ext}", src.dataset, _rec(src.name)
+                )
+            kinds[kind] = (wkb, columns, src)
         else:
             _foreign_layer(wkb, columns, src, foreign.setdefault(ext, _Foreign()), opts)
         done += 1
@@ -1262,20 +1658,33 @@ def read(
 
     for ext in order:
         tables = exact.get(ext, {})
+        lp, relinks = tables.get("line_points"), []
+        report = reports.setdefault(ext, _EditReport())
+        if ext in edited and lp is not None:
+            acc = _Foreign()
+            lp, relinks = _line_edits(lp, ext, edited[ext], opts, acc, report)
+            if acc.lines or acc.symbols or acc.texts:
+                more = foreign.setdefault(ext, _Foreign())
+                for name in ("symbols", "texts", "lines", "line_codes", "line_closed"):
+                    getattr(more, name)[:0] = getattr(acc, name)  # the map's own lines first
         lay = Layer.from_arrays(
             ext,
             symbols=tables.get("symbols"),
-            line_points=tables.get("line_points"),
+            line_points=lp,
             texts=tables.get("texts"),
         )
         acc = foreign.get(ext)
         if acc is not None:
-            lay = _add_foreign(lay, acc, tolerance_m, path)
+            lay = _add_foreign(lay, acc, tolerance_m, path, m.crs)
+        if relinks:
+            lay = _relink(lay, relinks, report)
+        if report.parts:
+            log.warning("%s: layer %s: edits taken: %s", path, ext, report.message())
         m.add_layer(lay)
     return m
 
 
-def _add_foreign(lay: Layer, acc: _Foreign, tolerance_m, path) -> Layer:
+def _add_foreign(lay: Layer, acc: _Foreign, tolerance_m, path, crs=None) -> Layer:
     from apygis.model.build import add_lines
     from apygis.model.map import _allocate
 
@@ -1298,7 +1707,12 @@ def _add_foreign(lay: Layer, acc: _Foreign, tolerance_m, path) -> Layer:
     if acc.lines:
         try:
             add_lines(
-                lay, acc.lines, acc.line_codes, closed=acc.line_closed, tolerance_m=tolerance_m
+                lay,
+                acc.lines,
+                acc.line_codes,
+                closed=acc.line_closed,
+                tolerance_m=tolerance_m,
+                crs=crs,  # tolerance_m metres in the CRS's units (degrees for lon/lat)
             )
         except FormatError:
             raise
@@ -1372,6 +1786,9 @@ def _driver(fmt: _Format, description: str, probe: Callable) -> Driver:
     def outs(map_, path):
         return outputs(map_, path, fmt)
 
+    def set_members(path):
+        return members(path, fmt)
+
     reader.__doc__ = f"Read a map from {fmt.ogr} (see :func:`apygis.formats.ogr.read`)."
     writer.__doc__ = f"Write a map as {fmt.ogr} (see :func:`apygis.formats.ogr.write`)."
     return Driver(
@@ -1382,6 +1799,7 @@ def _driver(fmt: _Format, description: str, probe: Callable) -> Driver:
         writer=writer,
         probe=probe,
         outputs=outs,
+        members=None if fmt.multi else set_members,
     )
 
 

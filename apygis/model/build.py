@@ -21,8 +21,13 @@ with references again, rebuilding the topology that plain geometry lost:
   line, it is linked there without being dropped (a short connector between
   two lines is joined at both ends), unless that line is already joined to
   it (a segment digitised twice is not folded onto itself).
-* "Coincide" means a planimetric (X, Y) distance of at most ``tolerance_m``;
-  the nearest candidate wins, ties going to the one read first.
+* "Coincide" means a planimetric (X, Y) distance of at most ``tolerance_m``
+  metres; the nearest candidate wins, ties going to the one read first. The
+  tolerance is converted to the units of the layer's CRS (``crs=``) by
+  :func:`tolerance_in_crs`: feet for a CRS in feet, and for a geographic CRS
+  degrees at the data's mean latitude, taking the smaller of a degree of
+  latitude and of longitude, so that no two vertices further apart than
+  ``tolerance_m`` metres are ever joined.
 
 This is the inverse of :func:`export_lines`, which appends each branch's
 junction vertex to the branch's polyline so that the drawn line touches its
@@ -42,7 +47,14 @@ import numpy as np
 from apygis.model import topology
 from apygis.model.records import LINE_DTYPE, MAX_CODE, NO_REF
 
-__all__ = ["LineSet", "Polyline", "add_lines", "export_lines"]
+__all__ = [
+    "LineSet",
+    "Polyline",
+    "add_lines",
+    "export_lines",
+    "metres_per_unit_at",
+    "tolerance_in_crs",
+]
 
 log = logging.getLogger(__name__)
 
@@ -160,12 +172,61 @@ def export_lines(layer) -> LineSet:
     )
 
 
+def metres_per_unit_at(crs, lat: float | None = None) -> tuple[float, float]:
+    """Metres of one CRS unit ``(east, north)`` at latitude ``lat`` (degrees).
+
+    1, 1 for metres (and for no CRS: apygis's model is in metres); the foot's
+    length for a CRS in feet; for a geographic CRS the length of a degree of
+    longitude and of latitude on its ellipsoid at ``lat`` (0 when not given).
+
+    >>> metres_per_unit_at("EPSG:2056")
+    (1.0, 1.0)
+    >>> [round(v) for v in metres_per_unit_at("EPSG:4326", 47.0)]
+    [76056, 111171]
+    """
+    if crs is None:
+        return 1.0, 1.0
+    from pyproj import CRS
+
+    c = crs if isinstance(crs, CRS) else CRS.from_user_input(crs)
+    axes = c.axis_info
+    if not axes:
+        return 1.0, 1.0
+    factor = float(axes[0].unit_conversion_factor or 1.0)
+    if not c.is_geographic:
+        return factor, factor
+    ell = c.ellipsoid
+    a = float(ell.semi_major_metre) if ell is not None else 6378137.0
+    e2 = 1.0 - (float(ell.semi_minor_metre) / a) ** 2 if ell is not None else 0.00669438
+    phi = np.radians(0.0 if lat is None or not np.isfinite(lat) else float(lat))
+    w = np.sqrt(1.0 - e2 * np.sin(phi) ** 2)
+    east = a * np.cos(phi) / w  # radius of the parallel
+    north = a * (1.0 - e2) / w**3  # meridian radius of curvature
+    return float(east * factor), float(north * factor)
+
+
+def tolerance_in_crs(tolerance_m: float, crs, lat: float | None = None) -> float:
+    """``tolerance_m`` metres in the units of ``crs``, never longer than that on the ground.
+
+    For a geographic CRS: degrees at latitude ``lat``, by the smaller of a
+    degree of longitude and of latitude there.
+
+    >>> tolerance_in_crs(0.005, "EPSG:2056")
+    0.005
+    >>> round(tolerance_in_crs(1.0, "EPSG:4326", 47.0) * 1e6, 2)  # 1 m in micro-degrees
+    13.15
+    """
+    east, north = metres_per_unit_at(crs, lat)
+    return float(tolerance_m) / min(east, north)
+
+
 def add_lines(
     layer,
     lines: Iterable,
     codes: Iterable[int] | int,
     closed: Iterable[bool] | None = None,
     tolerance_m: float = 0.005,
+    crs=None,
 ) -> list[list[int]]:
     """Add polylines to ``layer`` as line points, rebuilding their topology.
 
@@ -181,7 +242,11 @@ def add_lines(
         Lines known to be closed (polygon rings). Other lines are closed when
         their first and last vertices coincide.
     tolerance_m : float
-        Planimetric distance within which vertices coincide.
+        Planimetric distance in metres within which vertices coincide.
+    crs : optional
+        The CRS of the coordinates (anything pyproj takes); ``tolerance_m`` is
+        converted to its units (:func:`tolerance_in_crs`, at the mean latitude
+        of the lines for a geographic CRS). None: the coordinates are metres.
 
     Returns
     -------
@@ -210,6 +275,12 @@ def add_lines(
         raise RecordError("line codes are 0-99")
     want_closed = np.zeros(m, bool) if closed is None else np.asarray(list(closed), bool)
     tol = float(tolerance_m)
+    if not tol >= 0:
+        raise RecordError(f"the tolerance is a distance in metres >= 0, not {tolerance_m!r}")
+    if crs is not None and tol > 0:
+        ys = [a[:, 1].mean() for a in arrs if len(a)]
+        lat = float(np.mean(ys)) if ys else 0.0
+        tol = tolerance_in_crs(tol, crs, lat)
 
     # 1. closed lines: drop a repeated last vertex
     for i, a in enumerate(arrs):

@@ -44,7 +44,7 @@ def maps(draw):
     m = apygis.MapFile(
         draw(st.from_regex(r"[A-Za-z0-9_-]{1,32}", fullmatch=True)),
         scale=draw(st.none() | st.integers(1, 2**32 - 1)),
-        crs=draw(st.sampled_from([None, "EPSG:2056", "EPSG:4326", "EPSG:25832"])),
+        crs=draw(st.sampled_from([None, "EPSG:2056", "EPSG:2229", "EPSG:25832"])),
         notes=draw(st.sampled_from(["", "one line", "two\nlines", "Zürich – Nord"])),
     )
     exts = draw(st.lists(st.from_regex(r"[a-z]{1,3}", fullmatch=True), max_size=4, unique=True))
