@@ -14,6 +14,8 @@ added, followed by a recalculation").
 from __future__ import annotations
 
 import math
+import os
+import warnings
 from pathlib import Path
 
 import click
@@ -29,13 +31,19 @@ from apygis.orient.readers import (
     read_photo_file,
     read_photo_measurements,
 )
-from apygis.orient.transforms import MODELS, fit_map_transform
+from apygis.orient.transforms import MODELS, MirroredTransformWarning, fit_map_transform
 
 __all__ = ["orient"]
 
 GON = 200.0 / math.pi
 
-_in_file = click.Path(exists=True, dir_okay=False, path_type=Path)
+# No click checks on the paths: the readers report a missing file, a
+# directory or a symbolic-link loop as a FormatError naming the path (one
+# line, exit 1) like any other input error.
+_in_file = click.Path(path_type=Path)
+_out_file = click.Path(path_type=Path)
+
+NOT_CHECKED = "no redundancy: the result is not checked"
 
 
 def _reject_ids(values) -> tuple[str, ...]:
@@ -54,7 +62,8 @@ def _save(o: Orientation, output: Path) -> None:
 
 
 def _existing(path: Path | None) -> Orientation:
-    if path is not None and path.exists():
+    """The orientation file to update; a directory or a broken link there is a FormatError."""
+    if path is not None and os.path.lexists(path):
         return load_orientation(path)
     return Orientation()
 
@@ -85,18 +94,24 @@ def orient() -> None:
 @click.option(
     "-o",
     "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_out_file,
     default=None,
     help="Orientation file to write (an existing one is updated).",
 )
 @run_guarded
 def orient_map(control, measurements, model, reject, map_id, output):
     """Orient the map from CONTROL (ID X Y Z) and tablet MEASUREMENTS (ID x_mm y_mm)."""
+    existing = _existing(output)  # a bad output path fails before any work
     ctrl = read_control(control)
     ids, tablet = read_map_measurements(measurements)
     if not ids:
         raise MeasurementError(f"{measurements}: no measurements")
-    fit = fit_map_transform(ids, tablet, ctrl, model, reject=_reject_ids(reject))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", MirroredTransformWarning)
+        fit = fit_map_transform(ids, tablet, ctrl, model, reject=_reject_ids(reject))
+    for w in caught:
+        if issubclass(w.category, MirroredTransformWarning):
+            click.echo(f"warning: {w.message}", err=True)
     scale = fit.transform.mean_scale(fit.tablet_mm.mean(axis=0))
     click.echo(
         f"Map orientation: {model}, {len(fit.ids)} points, "
@@ -108,7 +123,13 @@ def orient_map(control, measurements, model, reject, map_id, output):
             f"{pid:>8} {G[0]:13.3f} {G[1]:13.3f} {v[0]:8.3f} {v[1]:8.3f} "
             f"{math.hypot(v[0], v[1]):8.3f} {int(n):3d}"
         )
-    click.echo(f"RMSE in position: {fit.rmse:.3f} m ({fit.rmse / scale:.3f} mm on the map)")
+    if not fit.checked:
+        click.echo(
+            f"{NOT_CHECKED} ({len(fit.ids)} points, {2 * len(fit.ids)} coordinates for "
+            f"{fit.transform.n_parameters} {model} parameters: no RMSE, no sigma0)"
+        )
+    else:
+        click.echo(f"RMSE in position: {fit.rmse:.3f} m ({fit.rmse / scale:.3f} mm on the map)")
     if math.isfinite(fit.sigma0):
         click.echo(f"sigma0 (one coordinate): {fit.sigma0:.3f} m")
     if math.isfinite(fit.pointing_sigma_mm):
@@ -119,7 +140,7 @@ def orient_map(control, measurements, model, reject, map_id, output):
     if fit.rejected:
         click.echo(f"rejected: {', '.join(fit.rejected)}")
     if output is not None:
-        o = _existing(output)
+        o = existing
         quality = dict(o.quality)
         quality["map"] = fit.summary()
         o = o.replace(
@@ -144,7 +165,7 @@ def orient_map(control, measurements, model, reject, map_id, output):
 @click.option(
     "-o",
     "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_out_file,
     default=None,
     help="Orientation file to write (an existing one is updated).",
 )
@@ -155,6 +176,7 @@ def orient_photos(photofile, control, measurements, reject, output):
     MEASUREMENTS has lines 'POINT_ID PHOTO_ID px_mm py_mm'; only the
     parameters not entered with '=' in PHOTOFILE are solved for.
     """
+    existing = _existing(output)  # a bad output path fails before any work
     entries = read_photo_file(photofile)
     ctrl = read_control(control)
     meas = read_photo_measurements(measurements)
@@ -182,7 +204,7 @@ def orient_photos(photofile, control, measurements, reject, output):
         results.append(r)
         _print_photo(r, G, ids)
     if output is not None:
-        o = _existing(output)
+        o = existing
         quality = dict(o.quality)
         quality["photos"] = {r.orientation.photo_id: r.summary() for r in results}
         o = o.replace(photos=tuple(r.orientation for r in results), quality=quality)
@@ -211,10 +233,16 @@ def _print_photo(r, G, ids) -> None:
             f"{pid:>8} {X:13.3f} {Y:13.3f} {Z:9.3f} {1000 * v[0]:8.1f} {1000 * v[1]:8.1f} "
             f"{1000 * math.hypot(v[0], v[1]):8.1f}"
         )
-    click.echo(
-        f"RMSE in position: {1000 * r.rmse_mm:.1f} um in the photo = "
-        f"{r.rmse_ground_m:.3f} m on the ground"
-    )
+    if not r.checked:
+        click.echo(
+            f"{NOT_CHECKED} ({len(r.ids)} spots, {2 * len(r.ids)} parallaxes for "
+            f"{len(r.free)} unknowns: no RMSE, no sigmas)"
+        )
+    else:
+        click.echo(
+            f"RMSE in position: {1000 * r.rmse_mm:.1f} um in the photo = "
+            f"{r.rmse_ground_m:.3f} m on the ground"
+        )
     if math.isfinite(r.sigma0_mm):
         click.echo(f"sigma0: {1000 * r.sigma0_mm:.1f} um, redundancy {r.redundancy}")
     std = r.std
@@ -232,9 +260,11 @@ def _print_photo(r, G, ids) -> None:
     for name, value, unit, k in rows:
         if po.interior.scanned and name in ("Yo", "sy"):
             click.echo(f"  {name:<6}{'':>16} {unit:<5} (scanned imagery: not used)")
-        elif name in std and math.isfinite(std[name]):
+        elif name not in r.free:
+            click.echo(f"  {name:<6}{value:16.5f} {unit:<5} (known)")
+        elif math.isfinite(std[name]):
             click.echo(f"  {name:<6}{value:16.5f} {unit:<5} +- {std[name] * k:.5f}")
         else:
-            click.echo(f"  {name:<6}{value:16.5f} {unit:<5} (known)")
+            click.echo(f"  {name:<6}{value:16.5f} {unit:<5} (solved, no sigma: not checked)")
     if r.rejected:
         click.echo(f"rejected: {', '.join(r.rejected)}")

@@ -63,6 +63,7 @@ def read_input(path, what: str = "file", max_bytes: int = MAX_TEXT_BYTES) -> byt
         Naming the path: no such file, a directory, a symbolic-link loop, no
         permission, not a regular file, larger than ``max_bytes``.
     """
+    a = "an" if what[:1] in "aeiou" else "a"
     try:
         p = Path(path)
         flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
@@ -70,7 +71,7 @@ def read_input(path, what: str = "file", max_bytes: int = MAX_TEXT_BYTES) -> byt
     except FileNotFoundError:
         raise FormatError(f"no such {what}", path) from None
     except IsADirectoryError:
-        raise FormatError(f"is a directory, not a {what}", path) from None
+        raise FormatError(f"is a directory, not {a} {what}", path) from None
     except PermissionError:
         raise FormatError(f"cannot read the {what}: permission denied", path) from None
     except (OSError, ValueError, TypeError) as exc:
@@ -78,14 +79,14 @@ def read_input(path, what: str = "file", max_bytes: int = MAX_TEXT_BYTES) -> byt
     try:
         st = os.fstat(fd)
         if stat.S_ISDIR(st.st_mode):
-            raise FormatError(f"is a directory, not a {what}", path)
+            raise FormatError(f"is a directory, not {a} {what}", path)
         if not stat.S_ISREG(st.st_mode):
             raise FormatError(
-                f"is not a regular file (a device, FIFO or socket), not a {what}", path
+                f"is not a regular file (a device, FIFO or socket), not {a} {what}", path
             )
         if st.st_size > max_bytes:
             raise FormatError(
-                f"{st.st_size} bytes is larger than the {max_bytes} bytes a {what} may have", path
+                f"{st.st_size} bytes is larger than the {max_bytes} bytes {a} {what} may have", path
             )
         chunks = []
         size = 0
@@ -97,7 +98,7 @@ def read_input(path, what: str = "file", max_bytes: int = MAX_TEXT_BYTES) -> byt
             size += len(b)
             if size > max_bytes:
                 raise FormatError(
-                    f"larger than the {max_bytes} bytes a {what} may have (it grew while read)",
+                    f"larger than the {max_bytes} bytes {a} {what} may have (it grew while read)",
                     path,
                 )
         return b"".join(chunks)

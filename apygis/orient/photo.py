@@ -169,9 +169,12 @@ class PhotoOrientationResult:
     residuals_mm : numpy.ndarray, shape (n, 2)
         ``computed - observed`` parallaxes per spot.
     rmse_mm : float
-        RMSE in position, ``sqrt(mean(vx**2 + vy**2))``.
+        RMSE in position, ``sqrt(mean(vx**2 + vy**2))``; nan when
+        ``redundancy`` is 0 (as many observations as unknowns, e.g. four
+        spots and all eight parameters: the fit is exact whatever the
+        errors, nothing is checked).
     rmse_ground_m : float
-        ``rmse_mm`` in ground metres at the mean photo scale.
+        ``rmse_mm`` in ground metres at the mean photo scale (nan likewise).
     sigma0_mm : float
         Standard error of unit weight (one parallax component); nan without
         redundancy.
@@ -197,20 +200,27 @@ class PhotoOrientationResult:
 
     @property
     def std(self) -> dict:
-        """Standard deviation of each free parameter, by name."""
+        """Standard deviation of each free parameter, by name (nan when unknown)."""
         return {
             n: float(math.sqrt(v)) for n, v in zip(self.free, np.diag(self.covariance), strict=True)
         }
 
+    @property
+    def checked(self) -> bool:
+        """Whether the spots check the orientation (redundancy > 0)."""
+        return self.redundancy > 0
+
     def summary(self) -> dict:
-        """Figures of merit (JSON-ready)."""
+        """Figures of merit (JSON-ready; nan figures become null in the file)."""
         return {
             "points": len(self.ids),
             "free": list(self.free),
+            "redundancy": self.redundancy,
+            "checked": self.checked,
             "rmse_mm": self.rmse_mm,
             "rmse_ground_m": self.rmse_ground_m,
             "sigma0_mm": self.sigma0_mm,
-            "redundancy": self.redundancy,
+            "std": self.std,
             "rejected": list(self.rejected),
         }
 
@@ -333,7 +343,7 @@ def orient_photo(
 
 
 def _result(po, ids, free, res, cov, r, iterations, reject, G):
-    rmse = float(np.sqrt((res**2).sum(axis=1).mean()))
+    rmse = float(np.sqrt((res**2).sum(axis=1).mean())) if r > 0 else math.nan
     sigma0 = float(np.sqrt((res**2).sum() / r)) if r > 0 else math.nan
     height = po.exterior.Zo - float(G[:, 2].mean())
     return PhotoOrientationResult(

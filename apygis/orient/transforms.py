@@ -41,6 +41,7 @@ Examples
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, fields
 
@@ -60,12 +61,23 @@ __all__ = [
     "BilinearTransform",
     "ConformalTransform",
     "MapOrientation",
+    "MirroredTransformWarning",
     "fit_map_transform",
     "transform_from_dict",
 ]
 
 #: Minimum number of different points per model.
 MODELS = {"conformal": 2, "affine": 3, "bilinear": 4}
+
+
+class MirroredTransformWarning(UserWarning):
+    """The fitted map transform mirrors the tablet (its Jacobian determinant is negative).
+
+    A tablet and a map are both right-handed, so a mirror means that x and y
+    were swapped (or one axis reversed) in the measurements, the control or
+    the tablet set-up. The fit is returned (``MapOrientation.mirrored`` is
+    true) because a deliberately mirrored set-up is possible.
+    """
 
 
 def _xy(a, what="points"):
@@ -320,11 +332,12 @@ class MapOrientation:
     residuals : numpy.ndarray, shape (n, 2)
         ``transform(tablet_mm) - ground`` per point, metres.
     rmse : float
-        RMSE in position, ``sqrt(mean(vX**2 + vY**2))`` over the points, metres.
+        RMSE in position, ``sqrt(mean(vX**2 + vY**2))`` over the points,
+        metres; nan when ``redundancy`` is 0 (an exact fit checks nothing).
     sigma0 : float
         Standard error of unit weight of one coordinate of one measurement,
         ``sqrt(sum(v**2) / (2 M - u))`` over all M measurements (ground
-        metres); nan without redundancy.
+        metres); nan when ``redundancy`` is 0.
     pointing_sigma_mm : float
         Pointing precision of one tablet coordinate from the repeated
         measurements: ``sqrt(sum((t - mean)**2) / (2 (M - n)))``; nan if no
@@ -333,6 +346,17 @@ class MapOrientation:
         The same in ground metres (times the transform's mean scale).
     rejected : tuple of str
         Ids rejected by the caller.
+    redundancy : int
+        ``2 n - u``: coordinates of the n different points beyond the ``u``
+        unknowns of the model. With 0 (two conformal, three affine, four
+        bilinear points) the transform fits the control exactly whatever the
+        errors: nothing is checked, and ``rmse`` and ``sigma0`` are nan
+        (repeated measurements still give ``pointing_sigma_mm``).
+    mirrored : bool
+        The transform's Jacobian determinant at the centroid of the points is
+        negative (a :class:`MirroredTransformWarning` was issued). A
+        conformal transform cannot mirror; with three or more points its
+        flag tells whether the best affine fit would.
     """
 
     transform: object
@@ -346,19 +370,29 @@ class MapOrientation:
     pointing_sigma_mm: float
     pointing_sigma: float
     rejected: tuple = ()
+    redundancy: int = 0
+    mirrored: bool = False
 
     @property
     def model(self) -> str:
         return self.transform.model
 
+    @property
+    def checked(self) -> bool:
+        """Whether the control checks the transform (redundancy > 0)."""
+        return self.redundancy > 0
+
     def summary(self) -> dict:
-        """Figures of merit (JSON-ready)."""
+        """Figures of merit (JSON-ready; nan figures become null in the file)."""
         return {
             "model": self.model,
             "points": len(self.ids),
+            "redundancy": self.redundancy,
+            "checked": self.checked,
             "rmse_m": self.rmse,
             "sigma0_m": self.sigma0,
             "pointing_sigma_mm": self.pointing_sigma_mm,
+            "mirrored": self.mirrored,
             "rejected": list(self.rejected),
         }
 
@@ -527,17 +561,57 @@ def fit_map_transform(
             f"the {model} map orientation needs {what}; points {', '.join(order)} do not "
             "determine it"
         )
+    # The ground side must span the plane too (else the transform is singular).
+    gs = float(np.sqrt(((G - Gm) ** 2).sum(axis=1).mean()))
+    if not gs > 1e-9 * (1.0 + float(np.abs(Gm).max())):
+        raise DegenerateGeometryError(
+            f"the control points {', '.join(order)} all have the same ground position: "
+            "no map transform"
+        )
     p, *_ = np.linalg.lstsq(A, obs, rcond=None)
+    if not np.all(np.isfinite(p)):
+        raise OrientationError(
+            f"the {model} map orientation overflowed: the coordinates are too large"
+        )
     transform = _denormalise(model, p, xm, ym, s, float(Gm[0]), float(Gm[1]))
+    centre = np.array([xm, ym])
+    det = float(np.linalg.det(transform.jacobian(centre)))
+    if not abs(det) > 1e-10 * (gs / s) ** 2:
+        raise DegenerateGeometryError(
+            f"the {model} map transform is singular: the ground positions of points "
+            f"{', '.join(order)} are collinear (or coincide) while their tablet positions are not"
+        )
+    mirrored = det < 0
+    if model == "conformal" and len(order) >= 3:  # a conformal fit cannot show a mirror
+        Aa, _ = _design("affine", ud, vd)
+        Ga = G - Gm
+        pa, *_ = np.linalg.lstsq(Aa, np.concatenate([Ga[:, 0], Ga[:, 1]]), rcond=None)
+        mirrored = bool(pa[0] * pa[4] - pa[1] * pa[3] < 0)
 
     v_all = transform.forward(t) - G[which]
     res = transform.forward(mean_t) - G
-    rmse = float(np.sqrt((res**2).sum(axis=1).mean()))
-    dof = 2 * len(t) - transform.n_parameters
-    sigma0 = float(np.sqrt((v_all**2).sum() / dof)) if dof > 0 else math.nan
+    if not (np.all(np.isfinite(v_all)) and np.all(np.isfinite(res))):
+        raise OrientationError(
+            f"the {model} map orientation overflowed: the coordinates are too large"
+        )
+    redundancy = 2 * len(order) - transform.n_parameters
+    if redundancy > 0:
+        rmse = float(np.sqrt((res**2).sum(axis=1).mean()))
+        dof = 2 * len(t) - transform.n_parameters
+        sigma0 = float(np.sqrt((v_all**2).sum() / dof))
+    else:  # an exact fit: residuals are 0 whatever the errors
+        rmse = sigma0 = math.nan
     dev = t - mean_t[which]
     rep_dof = 2 * (len(t) - len(order))
     psig = float(np.sqrt((dev**2).sum() / rep_dof)) if rep_dof > 0 else math.nan
+    if mirrored:
+        warnings.warn(
+            MirroredTransformWarning(
+                f"the {model} map transform mirrors the tablet (x and y swapped, or an axis "
+                f"reversed, in the measurements or the control?): points {', '.join(order)}"
+            ),
+            stacklevel=2,
+        )
     return MapOrientation(
         transform=transform,
         ids=tuple(order),
@@ -550,4 +624,6 @@ def fit_map_transform(
         pointing_sigma_mm=psig,
         pointing_sigma=psig * transform.mean_scale((xm, ym)),
         rejected=reject,
+        redundancy=redundancy,
+        mirrored=bool(mirrored),
     )
