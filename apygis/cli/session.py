@@ -46,19 +46,19 @@ def _copy_map(src_base, out, overwrite: bool):
 
 def _tablet_spec(tablet: str) -> tuple[str, str]:
     """``PROTOCOL:URL`` -> (protocol, url), both checked."""
+    from apygis.errors import ProtocolError
     from apygis.instrument.tablet import PROTOCOLS
 
     protocol, sep, url = tablet.partition(":")
     protocol = protocol.strip().lower()
     if not sep or not url.strip():
-        raise click.BadParameter(
-            f"{tablet!r}: expected PROTOCOL:URL, e.g. calcomp:/dev/ttyUSB0", param_hint="--tablet"
+        raise ProtocolError(
+            f"--tablet {tablet!r}: expected PROTOCOL:URL, e.g. calcomp:/dev/ttyUSB0"
         )
     if protocol not in PROTOCOLS:
-        raise click.BadParameter(
-            f"{tablet!r}: unknown tablet protocol {protocol!r}; expected one of "
-            f"{', '.join(PROTOCOLS)}",
-            param_hint="--tablet",
+        raise ProtocolError(
+            f"--tablet {tablet!r}: unknown tablet protocol {protocol!r}; expected one of "
+            f"{', '.join(PROTOCOLS)}"
         )
     return protocol, url
 
@@ -124,7 +124,7 @@ def session(
 
     from apygis.compile.oriented import OrientedGeometry
     from apygis.compile.session import ReportDecoder, Session, SessionLock, run_tablet_stream
-    from apygis.errors import ApygisError, FileOverwriteError, RecordError
+    from apygis.errors import ApygisError, FileOverwriteError, ProtocolError, RecordError
     from apygis.instrument.replay import Replayer, check_recording
     from apygis.instrument.simulator import BUTTONS
     from apygis.instrument.tablet import TabletConfig, make_parser
@@ -137,11 +137,11 @@ def session(
     if discard_journal and trust_journal:
         raise click.UsageError("--discard-journal and --trust-journal exclude each other")
     if motors and not (motors == "sim" or (motors.startswith("grbl:") and motors[5:])):
-        raise click.BadParameter(f"{motors!r}: grbl:URL or sim", param_hint="--motors")
+        raise ProtocolError(f"--motors {motors!r}: expected grbl:URL or sim")
     try:
         check_ext(layer)
     except RecordError as exc:
-        raise click.BadParameter(str(exc), param_hint="--layer") from None
+        raise RecordError(f"--layer: {exc}") from None
 
     # 1. everything the session needs, checked before any file is read or written
     geometry = OrientedGeometry(load_orientation(orientation))
