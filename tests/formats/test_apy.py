@@ -232,3 +232,46 @@ def test_missing_map_is_a_clear_error(tmp_path):
         apygis.read(tmp_path / "NOPE")
     with pytest.raises(FormatError, match="no such file"):
         apygis.read(tmp_path / "NOPE", driver="apy")
+
+
+# ------------------------------------------------------------------ hostile metadata (issue 9)
+
+
+def _layer_with_metadata(meta: bytes) -> bytes:
+    """An empty layer file ``r`` of map ``T`` whose metadata block is ``meta``, CRC valid."""
+    header = apy.HEADER.pack(apy.MAGIC, 1, 64, b"r", b"T", 0, len(meta), 0, 0, 0, 0, 0)
+    return _patch(header + meta, 0, b"")
+
+
+@pytest.mark.parametrize(
+    ("meta", "match"),
+    [
+        (b"[" * 10_000 + b"]" * 10_000, "JSON nested 10000 deep"),
+        (b'{"notes": ' + b"[" * 5000 + b"]" * 5000 + b"}", "JSON nested 5001 deep"),
+        (b'{"scale": ' + b"7" * 5000 + b"}", "an integer of 5000 digits"),
+        (b'{"crs": "EPSG:2056", "x": NaN}', "NaN is not a number JSON allows"),
+        (b'{"x": -Infinity}', "-Infinity is not a number JSON allows"),
+        (b'{"x": 1e999}', "overflows"),
+        (b'{"notes": "caf\\udcfc"}', "lone surrogate U\\+DCFC"),
+        (b'{"\\ud800": 1}', "lone surrogate U\\+D800"),
+        (b'{"notes": 5}', "'notes' must be a string"),
+        (b'["notes"]', "not a JSON object"),
+        (b"\xff{}", "not UTF-8"),
+    ],
+)
+def test_hostile_metadata_is_a_format_error(tmp_path, meta, match):
+    p = tmp_path / "T.r"
+    p.write_bytes(_layer_with_metadata(meta))
+    with pytest.raises(FormatError, match=match) as exc:
+        apygis.read(p, driver="apy")
+    assert exc.value.path == str(p)
+    assert "metadata" in str(exc.value)
+
+
+def test_metadata_with_valid_escapes_is_read(tmp_path):
+    p = tmp_path / "T.r"
+    p.write_bytes(_layer_with_metadata(b'{"notes": "caf\\u00e9 \\ud83d\\ude00", "crs": null}'))
+    with pytest.raises(FormatError, match="'crs' must be a string"):
+        apygis.read(p, driver="apy")
+    p.write_bytes(_layer_with_metadata(b'{"notes": "caf\\u00e9 \\ud83d\\ude00"}'))
+    assert apygis.read(p, driver="apy").notes == "caf\u00e9 \U0001f600"

@@ -118,3 +118,51 @@ def test_bad_input_names_the_line_and_what_was_expected(data, match, tmp_path):
 def test_map_without_layers_round_trips():
     m = apygis.MapFile("EMPTY", notes="\nblank first line")
     assert apa.decode(apa.encode(m)) == m
+
+
+# ------------------------------------------------------ hostile counts and digits (issue 9)
+
+
+@pytest.mark.parametrize("table", ["SYMBOLS", "LINEPOINTS", "TEXTS"])
+@pytest.mark.parametrize("count", [10**7, 10**12, int("9" * 18)])
+def test_huge_row_count_is_refused_without_allocating(table, count, tmp_path):
+    """A count of 10**12 once allocated 116 TiB: counts are bounded by the file first."""
+    import tracemalloc
+
+    p = tmp_path / "big.apa"
+    p.write_bytes(_doc(GOOD if table == "LINEPOINTS" else "", table=table, n=count))
+    tracemalloc.start()
+    try:
+        with pytest.raises(FormatError) as exc:
+            apygis.read(p, driver="ascii")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 10 * 2**20, f"{peak} bytes allocated for a file of {p.stat().st_size}"
+    assert exc.value.path == str(p)
+    assert exc.value.record in ("line 5", "line 6")
+    assert "row" in exc.value.reason
+
+
+@pytest.mark.parametrize(
+    ("line", "match"),
+    [
+        ("SCALE 5\u00b2", "line 3: SCALE must be a positive integer denominator"),
+        ("SCALE \u0665000", "line 3: SCALE must be a positive integer denominator"),
+        ("SCALE " + "9" * 5000, "line 3: SCALE must be"),
+        ("SCALE " + "0" * 5000 + "1", None),
+        ("LAYER r\nSYMBOLS \u00b2", "line 4: SYMBOLS must be followed by a row count"),
+        ("LAYER r\nTEXTS 1\u00b2", "line 4: TEXTS must be followed by a row count"),
+        ("LAYER r\nLINEPOINTS " + "7" * 5000, "line 4: LINEPOINTS must be followed"),
+        ("LAYER r\nLINEPOINTS 1_0", "line 4: LINEPOINTS must be followed"),
+    ],
+)
+def test_counts_and_scale_take_ascii_digits_only(line, match, tmp_path):
+    """str.isdigit() accepts '²' and other scripts' digits; int() refuses or misreads them."""
+    p = tmp_path / "d.apa"
+    p.write_text(f"APY ASCII 1\nMAP T\n{line}\nEND\n", encoding="utf-8")
+    if match is None:
+        assert apygis.read(p, driver="ascii").scale == 1
+        return
+    with pytest.raises(FormatError, match=match):
+        apygis.read(p, driver="ascii")

@@ -649,3 +649,108 @@ def test_a_removed_structure_word_gives_a_map_or_a_format_error(word, tmp_path):
     except FormatError as exc:
         got = exc
     assert isinstance(got, apygis.MapFile) or "m.dxf" in str(got)
+
+
+# ------------------------------------------------------------------------ hostile input (issue 9)
+
+
+def _header_entry(data: bytes, key: bytes) -> bytes:
+    """The tags of one entry of the APYGIS header record: ``1 key`` and its ``3`` chunks."""
+    start = data.index(b"  1\n" + key + b"\n  3\n")
+    end = data.index(b"\n  1\n", start + 4) + 1
+    if data.find(b"\n  0\n", start) < end:  # the last entry ends the record
+        end = data.index(b"\n  0\n", start) + 1
+    return data[start:end]
+
+
+@pytest.mark.parametrize(
+    "key", [b"format", b"version", b"id", b"scale", b"crs", b"notes", b"layers"]
+)
+def test_header_record_lacking_an_entry_is_a_format_error(key, tmp_path):
+    """A header record without ``scale`` or ``crs`` once ended in a KeyError."""
+    data = _seed(tmp_path)
+    entry = _header_entry(data, key)
+    assert data.count(entry) == 1
+    (tmp_path / "bad.dxf").write_bytes(data.replace(entry, b""))
+    for fast in (True, False):
+        with pytest.raises(FormatError, match="APYGIS header record") as exc:
+            dxf.read(tmp_path / "bad.dxf", fast=fast)
+        assert exc.value.path == str(tmp_path / "bad.dxf")
+        if key not in (b"format", b"version"):
+            assert f"no '{key.decode()}' entry" in str(exc.value)
+
+
+def test_header_record_without_entities_entry_is_read_through_ezdxf(tmp_path):
+    data = _seed(tmp_path)
+    (tmp_path / "a.dxf").write_bytes(data.replace(_header_entry(data, b"entities"), b""))
+    assert dxf.read(tmp_path / "a.dxf") == small_map()
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "match"),
+    [
+        (b"notes", b"[" * 3000 + b"]" * 3000, "JSON nested 3000 deep"),
+        (b"scale", b"9" * 5000, "an integer of 5000 digits"),
+        (b"scale", b"NaN", "NaN is not a number JSON allows"),
+        (b"scale", b"1e999", "overflows"),
+        (b"notes", b'"caf\\udcfc"', "lone surrogate U\\+DCFC"),
+        (b"crs", b'{"a": 1}', "bad crs"),
+    ],
+)
+def test_hostile_header_json_is_a_format_error(key, value, match, tmp_path):
+    data = _seed(tmp_path)
+    entry = _header_entry(data, key)
+    new = (
+        b"  1\n"
+        + key
+        + b"\n"
+        + b"".join(b"  3\n" + value[k : k + 250] + b"\n" for k in range(0, len(value), 250))
+    )
+    (tmp_path / "bad.dxf").write_bytes(data.replace(entry, new))
+    for fast in (True, False):
+        with pytest.raises(FormatError, match=match) as exc:
+            dxf.read(tmp_path / "bad.dxf", fast=fast)
+        assert exc.value.path == str(tmp_path / "bad.dxf")
+
+
+def _foreign_text_dxf(tmp_path, fmt: str) -> Path:
+    import ezdxf
+
+    doc = ezdxf.new("R2010")
+    doc.modelspace().add_text("cafXY", dxfattribs={"insert": (1, 2, 3), "layer": "r"})
+    doc.saveas(tmp_path / "t.dxf", fmt=fmt)
+    data = (tmp_path / "t.dxf").read_bytes()
+    assert data.count(b"cafXY") == 1
+    (tmp_path / "t.dxf").write_bytes(data.replace(b"cafXY", b"caf\xfc\xfc"))
+    return tmp_path / "t.dxf"
+
+
+@pytest.mark.parametrize("fmt", ["asc", "bin"])
+def test_undecodable_text_is_refused_not_carried_as_a_lone_surrogate(fmt, tmp_path):
+    """ezdxf decodes bad UTF-8 with surrogateescape: such a text could never be written."""
+    path = _foreign_text_dxf(tmp_path, fmt)
+    with pytest.raises(FormatError, match="lone surrogate U\\+DCFC") as exc:
+        apygis.read(path)
+    assert exc.value.path == str(path)
+    assert exc.value.reason.startswith("TEXT #")
+
+
+@pytest.mark.parametrize("value", [b"1e308", b"-2e12", b"inf"])
+def test_absurd_coordinates_are_refused(value, tmp_path):
+    """1e308 is finite but overflows the KD-tree that joins line ends."""
+    (tmp_path / "big.dxf").write_bytes(
+        b"  0\nSECTION\n  2\nENTITIES\n  0\nLINE\n  8\nr\n 10\n" + value + b"\n 20\n0\n 30\n0\n"
+        b" 11\n1\n 21\n0\n 31\n0\n  0\nENDSEC\n  0\nEOF\n"
+    )
+    with pytest.raises(FormatError, match="not finite or exceed 1e\\+12") as exc:
+        apygis.read(tmp_path / "big.dxf")
+    assert exc.value.reason.startswith("LINE #")
+
+
+def test_symbol_codes_and_numbers_take_ascii_digits_only():
+    assert dxf._symbol_code(None, "APY_SYM_07", 0) == 7
+    assert dxf._symbol_code(None, "APY_SYM_\u0660\u0667", 3) == 3  # Arabic-Indic 07
+    assert dxf._symbol_code("\u00b2", "x", 4) == 4
+    assert dxf._int_or_none(" -12 ") == -12
+    assert dxf._int_or_none("1_0") is None
+    assert dxf._int_or_none("9" * 5000) is None
