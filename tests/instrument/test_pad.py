@@ -31,6 +31,11 @@ def test_moved_buttons_leave_their_default_codes(tmp_path):
         ("13\n", "line 1: expected 'CODE NAME'"),
         ("x ENTER\n", "expected 'CODE NAME'"),
         ("300 ENTER\n", "outside 1-255"),
+        # str.isdigit() takes these, int() refuses (or reads) them: ASCII digits only
+        ("\u00b2 ENTER\n", "line 1: expected 'CODE NAME', CODE in ASCII digits"),
+        ("1\u00b9 ENTER\n", "line 1: expected 'CODE NAME', CODE in ASCII digits"),
+        ("\u0663 ENTER\n", "line 1: expected 'CODE NAME', CODE in ASCII digits"),
+        ("9" * 5000 + " ENTER\n", "line 1: button code 9999.*outside 1-255"),
         ("5 JUMP\n", "unknown button 'JUMP'"),
         ("5 ENTER\n6 ENTER\n", "line 2: ENTER is already on code 5"),
     ],

@@ -169,8 +169,35 @@ GOOD = '{"t": 0.1, "ch": "tablet", "hex": "80"}\n'
         (HEADER + '{"t": 0.1, "ch": "tablet", "hex": 80}\n', "line 2", "'hex' must be"),
         (HEADER + '{"t": 0.1, "ch": "tablet", "dir": "up", "hex": "80"}\n', "line 2", "'dir'"),
         (HEADER + "[]\n", "line 2", "JSON object"),
+        # hostile input: wrong header types, deep nesting, huge or non-finite numbers
+        ('{"format": "apygis-recording", "version": true}\n', "line 1", "version True"),
+        ('{"format": "apygis-recording", "version": 1, "protocol": 5}\n', "line 1",
+         "'protocol' must be a tablet protocol"),
+        ('{"format": "apygis-recording", "version": 1, "protocol": "wacom"}\n', "line 1",
+         "'protocol' must be a tablet protocol"),
+        ('{"format": "apygis-recording", "version": 1, "counts_per_mm": "abc"}\n', "line 1",
+         "'counts_per_mm' must be a number"),
+        ('{"format": "apygis-recording", "version": 1, "counts_per_mm": 0}\n', "line 1",
+         "'counts_per_mm' must be a number"),
+        ('{"format": "apygis-recording", "version": 1, "counts_per_mm": 1e400}\n', "line 1",
+         "'counts_per_mm' must be a number"),
+        ('{"format": "apygis-recording", "version": 1, "counts_per_mm": NaN}\n', "line 1",
+         "'counts_per_mm' must be a number"),
+        ('{"format": "apygis-recording", "version": 1, "counts_per_mm": ' + "9" * 400 + "}\n",
+         "line 1", "'counts_per_mm' must be a number"),
+        ('{"format": "apygis-recording", "version": 1, "created": 5}\n', "line 1",
+         "'created' must be"),
+        ("[" * 100000 + "]" * 100000 + "\n", "line 1", "JSON nested too deeply"),
+        (HEADER + '{"a": ' * 50000 + "1" + "}" * 50000 + "\n", "line 2", "nested too deeply"),
+        (HEADER + '{"t": ' + "9" * 400 + ', "ch": "tablet", "hex": "80"}\n', "line 2",
+         "'t' must be"),
+        (HEADER + '{"t": ' + "9" * 5000 + ', "ch": "tablet", "hex": "80"}\n', "line 2",
+         "bad JSON"),
+        (HEADER + '{"t": 1e300, "ch": "tablet", "hex": "80"}\n', "line 2", "'t' must be"),
+        (HEADER + '{"t": NaN, "ch": "tablet", "hex": "80"}\n', "line 2", "'t' must be"),
+        (HEADER + '{"t": Infinity, "ch": "tablet", "hex": "80"}\n', "line 2", "'t' must be"),
     ],
-)
+)  # fmt: skip
 def test_bad_recordings(tmp_path, text, record, pattern):
     path = tmp_path / "bad.rec"
     path.write_text(text, encoding="utf-8")
@@ -181,6 +208,19 @@ def test_bad_recordings(tmp_path, text, record, pattern):
     if record:
         assert f"{path}: {record}: " in msg
     assert pattern in msg
+
+
+def test_check_recording_reads_every_line_first(tmp_path):
+    from apygis.instrument.replay import check_recording
+
+    path = tmp_path / "late.rec"
+    path.write_text(HEADER + GOOD * 3 + '{"t": 0.1, "ch": "tablet", "hex": "8"}\n')
+    with pytest.raises(FormatError, match="line 5: 'hex'"):
+        check_recording(path)
+    path.write_text(HEADER.replace("}", ', "protocol": "mm", "counts_per_mm": 40}') + GOOD)
+    assert check_recording(path)["protocol"] == "mm"
+    with pytest.raises(InstrumentError, match="speed"):
+        Replayer(path, speed=10**400)
 
 
 def test_bad_recording_bytes(tmp_path):

@@ -341,3 +341,33 @@ def test_huge_durations_refused():
     for text in ("move 0 0\nhold UP 1e9\n", "move 0 0\nglide 1 1 1e12\n"):
         with pytest.raises(FormatError, match=r"line 2: .*more than"):
             parse_script(text)
+
+
+def test_a_script_has_a_total_size_cap():
+    """Each line under the per-command cap, together far over it: refused at the line."""
+    from apygis.instrument.simulator import MAX_REPORTS
+
+    text = "rate 100000\nmove 0 0\n" + "hold UP 1.5\n" * 10
+    with pytest.raises(FormatError, match=rf"line 4: hold: .*more than {MAX_REPORTS} tablet"):
+        parse_script(text)
+    many_moves = "move 0 0\n" * (MAX_REPORTS + 1)
+    with pytest.raises(FormatError, match=rf"line {MAX_REPORTS + 1}: a report: .*in all"):
+        parse_script(many_moves)
+
+
+def test_a_script_has_a_time_and_typing_cap(tmp_path):
+    from apygis.instrument.simulator import MAX_DURATION_S, MAX_SCRIPT_BYTES, MAX_TYPED
+
+    with pytest.raises(FormatError, match=r"line 2: wait: .*more than 86400 s"):
+        parse_script(f"wait {MAX_DURATION_S}\nwait 1\n")
+    with pytest.raises(FormatError, match=r"line 3: glide: .*more than 86400 s"):
+        parse_script(f"move 0 0\nwait {MAX_DURATION_S - 0.5}\nglide 1 1 1\n")
+    chunk = "x" * 100_000
+    text = f"type {chunk}\n" * (MAX_TYPED // len(chunk) + 1)
+    with pytest.raises(FormatError, match=rf"line {MAX_TYPED // len(chunk) + 1}: type: .*"):
+        parse_script(text)
+    big = tmp_path / "big.txt"
+    with open(big, "wb") as fh:
+        fh.truncate(MAX_SCRIPT_BYTES + 1)
+    with pytest.raises(FormatError, match=r"big\.txt: .*at most"):
+        read_script(big)
