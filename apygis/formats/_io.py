@@ -576,7 +576,9 @@ def _length(m: float) -> str:
     return f"{m * 100:.3g} cm"
 
 
-def check_resolution(map_, path, step: float, what: str, limit_m: float = 0.01) -> None:
+def check_resolution(
+    map_, path, step: float, what: str, limit_m: float = 0.01, hint: str | None = None
+) -> None:
     """Refuse a map whose CRS unit makes ``step`` (in CRS units) coarser than ``limit_m``.
 
     ``what`` says how the format stores coordinates ("APY ASCII stores
@@ -595,7 +597,8 @@ def check_resolution(map_, path, step: float, what: str, limit_m: float = 0.01) 
     unit = "degrees" if name == "degree" else f"{name}s"
     sym = _SYMBOL.get(name, f" {name}")
     step_txt = f"{step:g}{sym}"
-    hint = "choose a projected CRS" if geographic else "choose a CRS in metres or feet"
+    if hint is None:
+        hint = "choose a projected CRS" if geographic else "choose a CRS in metres or feet"
     raise FormatError(
         f"{what}; {crs_string(crs)} is in {unit}, so {step_txt} ≈ {_length(lost)} "
         f"would be lost: {hint}",

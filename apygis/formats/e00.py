@@ -644,13 +644,8 @@ def _check_precision(map_: MapFile, target: Path, precision: int) -> None:
                 path=target,
             )
         return
-    try:
-        check_resolution(map_, target, step, what)
-    except FormatError as exc:
-        raise FormatError(
-            f"{exc.reason}" + (" (or write double precision)" if precision == SINGLE else ""),
-            path=target,
-        ) from None
+    hint = "write double precision" if precision == SINGLE else None
+    check_resolution(map_, target, step, what, hint=hint)
 
 
 def write(map_: MapFile, path, progress=None, precision: int = DOUBLE) -> list[Path]:

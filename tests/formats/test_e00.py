@@ -192,7 +192,29 @@ def test_round_trip_property(m, tmp_path_factory):
     assert apygis.read(target) == m
 
 
+def _local(m):
+    """The map moved to small local coordinates (thousands of metres): 8 digits hold cm."""
+    out = apygis.MapFile(m.id, m.scale, None, m.notes)
+    for lay in m:
+        tables = {}
+        for name in ("symbols", "line_points", "texts"):
+            t = lay.table(name).copy()
+            t["x"] -= 2680000.0
+            t["y"] -= 1245000.0
+            tables[name] = t
+        out.add_layer(apygis.Layer.from_arrays(lay.ext, **tables))
+    return out
+
+
+def test_single_precision_refuses_what_it_cannot_hold(sample_map, tmp_path):
+    # 8 significant digits at Swiss coordinates (2 684 000 m) are decimetres
+    with pytest.raises(FormatError, match=r"single precision .* would be lost"):
+        apygis.write(sample_map, tmp_path / "S.e00", precision=e00.SINGLE)
+    assert not list(tmp_path.iterdir())
+
+
 def test_single_precision(sample_map, tmp_path):
+    sample_map = _local(sample_map)
     apygis.write(sample_map, tmp_path / "S.e00", precision=e00.SINGLE)
     text = (tmp_path / "S.e00").read_bytes()
     assert b"\nARC  2\n" in text
@@ -360,3 +382,97 @@ def test_recover_keeps_what_was_read(tmp_path, small_e00):
     m = apygis.read(p, recover=True)
     lay = m.layers[e00.DEFAULT_LAYER]
     assert len(lay.chains()) == len(export_lines(strategies.small_map().layers["r"]))
+
+
+# ------------------------------------------------------------------------ hostile input (issue 9)
+
+
+class _HangGuard:
+    """Fail (not hang) if the block runs longer than ``seconds``: SIGALRM, main thread."""
+
+    def __init__(self, seconds: int):
+        self.seconds = seconds
+
+    def __enter__(self):
+        import signal
+
+        def _timeout(signum, frame):
+            raise TimeoutError(f"still running after {self.seconds} s")
+
+        self.old = signal.signal(signal.SIGALRM, _timeout)
+        signal.alarm(self.seconds)
+
+    def __exit__(self, *exc):
+        import signal
+
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, self.old)
+
+
+def test_decompressing_a_400_kb_number_is_linear(tmp_path):
+    """Each digit pair counted the digits so far: 400 KB took minutes (quadratic)."""
+    p = tmp_path / "long.e00"
+    p.write_bytes(b"EXP  1 /LONG.E00\nARC  2~}~!" + b"5" * 400_000 + b"~}EOS~}")
+    with _HangGuard(20), pytest.raises(FormatError, match="longer than 80 characters") as exc:
+        apygis.read(p)
+    assert exc.value.record == "uncompressed line 2"
+
+
+def test_a_400_kb_compressed_file_is_read(tmp_path):
+    m = apygis.MapFile("BIG", crs="EPSG:2056")
+    t = np.linspace(0, 2000, 9000)
+    m.layer("r").add_line(np.column_stack([2.6e6 + t, 1.2e6 + np.sin(t) * 50, t / 10]), code=3)
+    apygis.write(m, tmp_path / "BIG.e00")
+    packed = _compress((tmp_path / "BIG.e00").read_bytes())
+    assert len(packed) > 400_000
+    (tmp_path / "packed.e00").write_bytes(packed)
+    with _HangGuard(20):
+        back = apygis.read(tmp_path / "packed.e00")
+    assert len(back.layers["r"].line_points) == 9000
+
+
+def _meta_line(key: bytes, value: bytes) -> bytes:
+    """A record of the APYMAP table: KEY (8), VALUE (61), NBYTES (11 columns)."""
+    return key.ljust(8) + value.ljust(61) + str(len(value)).encode().rjust(11)
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "match"),
+    [
+        (b"NOTES", b"caf\\udcfc", "lone surrogate U+DCFC"),
+        (b"ID", b"\\ud800x", "lone surrogate U+D800"),
+        (b"SCALE", "\u0665\u0660\u0660\u0660".encode(), "SCALE value '\u0665\u0660\u0660\u0660'"),
+        (b"SCALE", b"5 000", "is not a whole number"),
+        (b"NOTES", b"bad \\x escape", "NOTES value is not UTF-8 JSON"),
+    ],
+)
+def test_hostile_metadata_values(tmp_path, small_e00, key, value, match):
+    old = next(ln for ln in small_e00.split(b"\n") if ln.startswith(key.ljust(8)))
+    data = _edit(small_e00, old, _meta_line(key, value))
+    p = tmp_path / "bad.e00"
+    p.write_bytes(data)
+    with pytest.raises(FormatError, match=re.escape(match)) as exc:
+        apygis.read(p)
+    assert exc.value.path == str(p)
+    assert "APYMAP" in exc.value.reason
+
+
+@pytest.mark.parametrize(
+    ("new", "what"),
+    [
+        (b" 1.0000000000000E+308", "ARC vertex"),
+        (b"-2.0000000000000E+012", "ARC vertex"),
+        (b"                  nan", "ARC vertex"),
+    ],
+)
+def test_absurd_coordinates_are_refused(tmp_path, small_e00, new, what):
+    """1e308 is finite but overflows the KD-tree that joins arc ends."""
+    old = b" 2.68300000000000E+06"
+    assert len(new) == len(old)
+    data = _edit(small_e00, old, new)
+    p = tmp_path / "big.e00"
+    p.write_bytes(data)
+    with pytest.raises(FormatError, match=f"{what}: expected a number") as exc:
+        apygis.read(p)
+    assert exc.value.record == _line_of(data, new)
+    assert "1e+12 in magnitude" in exc.value.reason
