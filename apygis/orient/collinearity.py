@@ -64,6 +64,7 @@ __all__ = [
     "ExteriorOrientation",
     "InteriorOrientation",
     "collinearity_jacobian",
+    "depth",
     "ground_to_photo",
     "parallax",
     "parallax_jacobian",
@@ -188,6 +189,26 @@ def _reduced(ground: np.ndarray, eo: ExteriorOrientation, scanned: bool) -> np.n
     if scanned:
         d[:, 1] = 0.0
     return d
+
+
+def depth(ground, exterior: ExteriorOrientation, interior: InteriorOrientation) -> np.ndarray:
+    """The z coordinate ``q_z`` of ground points in the camera frame, metres.
+
+    ``q = R.T @ (X - Xo, Y - Yo, Z - Zo)`` (``Y - Yo = 0`` for scanned
+    imagery). The camera looks down its negative z axis
+    (:mod:`apygis.orient.rotation`), so a point lies **in front of** the
+    camera when ``q_z < 0`` and behind it (or in the plane of the projection
+    centre) otherwise; the collinearity condition (a) cannot tell the two
+    apart, an orientation must.
+
+    Examples
+    --------
+    >>> eo = ExteriorOrientation(0.0, 0.0, 1000.0)
+    >>> depth([[0.0, 0.0, 0.0], [0.0, 0.0, 2000.0]], eo, InteriorOrientation(153.0)).tolist()
+    [-1000.0, 1000.0]
+    """
+    g = _points(ground, 3, "ground")
+    return _reduced(g, exterior, interior.scanned) @ exterior.rotation[:, 2]
 
 
 def ground_to_photo(ground, exterior: ExteriorOrientation, interior: InteriorOrientation):

@@ -61,6 +61,7 @@ from apygis.orient._lsq import gauss_newton
 from apygis.orient.collinearity import (
     ExteriorOrientation,
     InteriorOrientation,
+    depth,
     ground_to_photo,
     parallax,
     parallax_jacobian,
@@ -274,6 +275,9 @@ def orient_photo(
         Unknown ids in ``reject``, non-finite data, mismatched shapes.
     ConvergenceError
         Gauss-Newton did not converge from ``approx``.
+    OrientationError
+        The solution puts control spots behind the camera (depth ``q_z >=
+        0``, :func:`~apygis.orient.collinearity.depth`).
     """
     G = np.asarray(ground, dtype=float)
     P = np.asarray(parallax_mm, dtype=float)
@@ -331,6 +335,13 @@ def orient_photo(
     sol_x = p_all.copy()
     sol_x[idx] = sol.x
     po = approx.with_parameters(sol_x)
+    behind = int(np.count_nonzero(~(depth(G, po.exterior, po.interior) < 0.0)))
+    if behind:
+        raise OrientationError(
+            f"{what}: {behind} of {len(G)} control spots lie behind the camera in the solution "
+            "(the camera looks down its -z axis, apygis.orient.rotation): check the approximate "
+            "values (kappa, the sign of sx/sy) and the measurements"
+        )
     res = sol.f.reshape(-1, 2)
     r = sol.redundancy
     if r > 0:

@@ -94,6 +94,29 @@ def _vectors(p, io):
     return v
 
 
+def _behind(r1: np.ndarray, r2: np.ndarray, b: np.ndarray) -> tuple[int, int]:
+    """How many tie points lie behind the left and the right camera.
+
+    The rays ``C1 + l1 r1`` and ``C2 + l2 r2`` (``C2 - C1 = b``, ``r = R (x -
+    x0, y - y0, -c)``) come closest at the least-squares ``(l1, l2)`` of
+    ``l1 r1 - l2 r2 = b``; the image point is at ``l = 1``, so a point in
+    front of a camera has ``l > 0`` (depth ``q_z = -c l < 0``,
+    :mod:`apygis.orient.rotation`). Parallel rays (a point at infinity) are
+    not counted.
+    """
+    a = np.einsum("ij,ij->i", r1, r1)
+    m = np.einsum("ij,ij->i", r1, r2)
+    c = np.einsum("ij,ij->i", r2, r2)
+    d = r1 @ b
+    e = r2 @ b
+    den = a * c - m * m
+    ok = den > 1e-12 * a * c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        l1 = (d * c - m * e) / den
+        l2 = (m * d - a * e) / den
+    return int(np.count_nonzero(ok & ~(l1 > 0))), int(np.count_nonzero(ok & ~(l2 > 0)))
+
+
 def relative_orientation(
     left_mm,
     right_mm,
@@ -129,6 +152,11 @@ def relative_orientation(
     ------
     DegenerateGeometryError
         Fewer than five points or a critical configuration.
+    OrientationError
+        The solution puts tie points behind a camera (rays that meet behind
+        the projection centre, depth ``q_z >= 0``): coplanarity holds for
+        such a "twisted" or mirrored pair too, e.g. when x and y of the photo
+        coordinates are swapped; the message says how many.
 
     Examples
     --------
@@ -191,6 +219,15 @@ def relative_orientation(
     for k in range(2, 5):
         x[k] = math.remainder(x[k], 2 * math.pi)
     base = np.array([bx, x[0], x[1]])
+    r2 = v2 @ rotation_matrix(x[2], x[3], x[4]).T
+    b1, b2 = _behind(r1, r2, base)
+    if b1 or b2:
+        raise OrientationError(
+            f"relative orientation: the solution puts tie points behind the cameras "
+            f"({b1} of {n} behind the left, {b2} of {n} behind the right; the cameras look "
+            "down their -z axes, apygis.orient.rotation): are x and y of the photo "
+            "coordinates swapped, a sign reversed, or the start values far off?"
+        )
     c2 = left.centre + base
     right = ExteriorOrientation(c2[0], c2[1], c2[2], x[2], x[3], x[4])
     try:

@@ -37,6 +37,7 @@ from apygis.orient.collinearity import (
     ExteriorOrientation,
     InteriorOrientation,
     collinearity_jacobian,
+    depth,
 )
 from apygis.orient.rotation import angles_from_matrix, nearest_rotation
 
@@ -53,7 +54,8 @@ class ResectionResult:
     residuals_mm : numpy.ndarray, shape (n, 2)
         ``computed - observed`` photo coordinates.
     rmse_mm : float
-        ``sqrt(mean(vx**2 + vy**2))``.
+        ``sqrt(mean(vx**2 + vy**2))``; nan for three points (no redundancy:
+        the fit is exact whatever the errors, nothing is checked).
     sigma0_mm : float
         ``sqrt(v^T v / (2 n - 6))``; nan for three points.
     covariance : numpy.ndarray, shape (6, 6)
@@ -198,6 +200,12 @@ def resect(
         parameter.
     ConvergenceError
         No convergence from the start values.
+    OrientationError
+        The solution puts control points behind the camera (depth ``q_z >=
+        0``, see :func:`~apygis.orient.collinearity.depth`): the collinearity
+        equations are satisfied by a camera looking away from the points,
+        e.g. when x and y of the photo coordinates are swapped (a mirrored
+        photo); the message says how many.
 
     Examples
     --------
@@ -241,12 +249,20 @@ def resect(
     for k in range(3, 6):
         x[k] = math.remainder(x[k], 2 * math.pi)
     eo = ExteriorOrientation.from_parameters(x)
+    behind = int(np.count_nonzero(~(depth(G, eo, interior) < 0.0)))
+    if behind:
+        raise OrientationError(
+            f"space resection: {behind} of {n} control points lie behind the camera in the "
+            "solution (the camera looks down its -z axis, apygis.orient.rotation); a photo "
+            "cannot show them: are x and y of the photo coordinates swapped, or a sign reversed?"
+        )
     res = sol.f.reshape(-1, 2)
     sigma = float(sigma_mm) if sigma_mm is not None else sol.sigma0
+    r = sol.redundancy
     return ResectionResult(
         exterior=eo,
         residuals_mm=res,
-        rmse_mm=float(np.sqrt((res**2).sum(axis=1).mean())),
+        rmse_mm=float(np.sqrt((res**2).sum(axis=1).mean())) if r > 0 else math.nan,
         sigma0_mm=sol.sigma0,
         covariance=sigma**2 * sol.cofactor,
         redundancy=sol.redundancy,
