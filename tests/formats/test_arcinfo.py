@@ -499,3 +499,58 @@ def test_columnar_scale(tmp_path):
     back = apygis.read(tmp_path / "BIG.gen").layers["r"]
     assert back.counts() == m.layers["r"].counts()
     np.testing.assert_array_equal(back.symbols, m.layers["r"].symbols)
+
+
+# ------------------------------------------------------------------------ hostile input (issue 9)
+
+
+@pytest.mark.parametrize(
+    ("data", "where"),
+    [
+        (b"1\n1e308,0\n2,2\nEND\nEND\n", "line 2"),  # finite: overflowed the KD-tree
+        (b"1\n0,0\n2,-1.5e12\nEND\nEND\n", "line 3"),
+        (b"1\n0,0,0\n2,2,1e300\nEND\nEND\n", "line 3"),
+        (b"1,1e308,49\n2,3,50\nEND\n", "line 1"),
+        (b"1,2,49,inf\nEND\n", "line 1"),
+    ],
+)
+def test_absurd_coordinates_are_refused(tmp_path, data, where):
+    p = tmp_path / "big.gen"
+    p.write_bytes(data)
+    with pytest.raises(FormatError, match=r"at most 1e\+12 in magnitude") as exc:
+        apygis.read(p, driver="generate")
+    assert exc.value.record == where
+    assert exc.value.path == str(p)
+
+
+def test_lines_just_inside_the_bound_are_read(tmp_path):
+    p = tmp_path / "ok.gen"
+    p.write_bytes(b"1\n-999999999999,0\n999999999999,1\nEND\nEND\n")
+    lp = apygis.read(p, driver="generate").layers["a"].line_points
+    assert sorted(lp["x"].tolist()) == [-999999999999.0, 999999999999.0]
+
+
+@pytest.mark.parametrize(
+    ("table", "what"),
+    [
+        ("ID,CODE\n1,\u0663\n", "CODE must be an integer from 0 to 99, not '\u0663'"),
+        ("ID,CODE\n1,1_0\n", "CODE must be an integer from 0 to 99, not '1_0'"),
+        ("ID,CODE\n\u00b9,1\n", "ID must be an integer"),
+        ("ID,CODE\n" + "1" * 5000 + ",1\n", "ID must be an integer"),
+    ],
+)
+def test_attribute_integers_take_ascii_digits_only(tmp_path, table, what):
+    """int() reads Arabic-Indic digits and '1_0'; 5000 digits raised a bare ValueError."""
+    (tmp_path / "L.gen").write_bytes(b"1\n2,49\n3,50\nEND\nEND\n")
+    (tmp_path / "L.csv").write_text(table, encoding="utf-8")
+    with pytest.raises(FormatError, match=re.escape(what)) as exc:
+        apygis.read(tmp_path / "L.gen")
+    assert exc.value.path == str(tmp_path / "L.csv")
+    assert exc.value.record == "line 2"
+
+
+def test_attribute_height_beyond_the_bound_is_refused(tmp_path):
+    (tmp_path / "P.gen").write_bytes(b"1,2,49\nEND\n")
+    (tmp_path / "P.csv").write_text("ID,CODE,HEIGHT\n1,3,1e300\n")
+    with pytest.raises(FormatError, match=r"HEIGHT must be a finite number of at most 1e\+12"):
+        apygis.read(tmp_path / "P.gen")
