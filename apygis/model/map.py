@@ -45,7 +45,15 @@ from apygis.model.records import (
     Table,
 )
 
-__all__ = ["Layer", "MapFile", "check_ext", "check_map_id", "check_text", "crs_string"]
+__all__ = [
+    "Layer",
+    "MapFile",
+    "check_encodable",
+    "check_ext",
+    "check_map_id",
+    "check_text",
+    "crs_string",
+]
 
 _EXT_RE = re.compile(r"^[a-z]{1,3}$")
 _ID_RE = re.compile(r"^[A-Za-z0-9_-]{1,32}$")
@@ -89,15 +97,39 @@ def _check_xyz(x, y, z) -> tuple[float, float, float]:
     return v
 
 
+def check_encodable(value: str, what: str) -> str:
+    """``value`` if it can be encoded (as UTF-8), else a RecordError naming ``what``.
+
+    Only a lone surrogate (U+D800-U+DFFF, as ``surrogateescape`` decoding
+    leaves for undecodable bytes) cannot: no file format could store it.
+
+    >>> check_encodable("Kirchweg", "a text")
+    'Kirchweg'
+    >>> try:
+    ...     check_encodable("Z\\udcfcrich", "the notes")
+    ... except RecordError as exc:
+    ...     print(exc)
+    the notes cannot be encoded: character 2 of 'Z\\udcfcrich' is a lone surrogate (U+DCFC)
+    """
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        raise RecordError(
+            f"{what} cannot be encoded: character {exc.start + 1} of {value!r} is a lone "
+            f"surrogate (U+{ord(value[exc.start]):04X})"
+        ) from None
+    return value
+
+
 def check_text(text) -> str:
-    """A text: a string of at most 24 characters, no control characters."""
+    """A text: a string of at most 24 characters, no control characters, encodable."""
     if not isinstance(text, str):
         raise RecordError(f"a text is a string, not {text!r}")
     if len(text) > TEXT_LEN:
         raise RecordError(f"a text has at most {TEXT_LEN} characters, {text!r} has {len(text)}")
     if any(ord(c) < 32 or 127 <= ord(c) < 160 for c in text):
         raise RecordError(f"a text may not contain control characters: {text!r}")
-    return text
+    return check_encodable(text, "a text")
 
 
 def _linked(lp: np.ndarray, i: int, j: int) -> bool:
@@ -456,6 +488,19 @@ class Layer:
         issues = topology.validate_numbers("symbols", self.symbols["num"])
         issues += topology.validate_numbers("texts", self.texts["num"])
         issues += topology.validate_line_points(self.line_points)
+        tx = self.texts
+        codes = np.ascontiguousarray(tx["text"]).view("<u4").reshape(len(tx), TEXT_LEN)
+        bad = ((codes >= 0xD800) & (codes <= 0xDFFF)).any(axis=1)
+        issues += [
+            topology.Issue(
+                "error",
+                "texts",
+                int(n),
+                "unencodable-text",
+                f"text {n}: {t!r} holds a lone surrogate, which no file format can encode",
+            )
+            for n, t in zip(tx["num"][bad], tx["text"][bad].tolist(), strict=True)
+        ]
         bad = (self.symbols["code"] < 0) | (self.symbols["code"] > MAX_CODE)
         issues += [
             topology.Issue("error", "symbols", int(n), "bad-code", f"symbol {n}: code outside 0-99")
@@ -569,7 +614,7 @@ class MapFile:
     def notes(self, value: str) -> None:
         if not isinstance(value, str):
             raise RecordError(f"notes are a string, not {value!r}")
-        self._notes = value
+        self._notes = check_encodable(value, "the notes")
 
     def layer(self, ext: str) -> Layer:
         """The layer with extension ``ext``, created empty if absent."""

@@ -302,3 +302,44 @@ def test_delete_line_point_in_a_loop_of_three_keeps_the_branch():
         n[3]: (n[1], NO_REF, NO_REF, NO_REF),
     }
     assert lay.branches() == [{"chain": 1, "end": "end", "point": n[3], "junction": n[1]}]
+
+
+@pytest.mark.parametrize(
+    ("call", "field"),
+    [
+        (lambda m: setattr(m, "notes", "Z\udcfcrich"), "the notes"),
+        (lambda m: apygis.MapFile("T", notes="\ud800"), "the notes"),
+        (lambda m: m.layer("r").add_text(0, 0, 0, "Br\udcfccke"), "a text"),
+        (lambda m: apygis.MapFile("Z\udcfcrich"), "map ID"),
+        (lambda m: m.layer("\udcfc"), "layer extension"),
+    ],
+)
+def test_lone_surrogates_are_refused_naming_the_field(call, field):
+    # Issue 9: '\udcfc' (what surrogateescape makes of a Latin-1 byte) was accepted in
+    # notes and texts, and the map then failed to write.
+    m = apygis.MapFile("T", notes="n")
+    with pytest.raises(RecordError, match=field) as exc:
+        call(m)
+    assert isinstance(exc.value, ValueError)
+    assert m.notes == "n"
+    assert len(m.layer("r")) == 0
+
+
+def test_unencodable_texts_from_arrays_are_reported_by_validate():
+    lay = apygis.MapFile("T").layer("r")
+    lay.add_text(0, 0, 0, "Zürich")
+    bad = lay.texts.copy()
+    bad["text"][0] = "Z\udcfcrich"
+    lay = type(lay).from_arrays("r", texts=bad)
+    (issue,) = lay.validate()
+    assert issue.kind == "unencodable-text"
+    assert issue.severity == "error"
+    assert "text 1" in issue.message
+    assert "lone surrogate" in issue.message
+
+
+def test_a_map_with_latin1_notes_and_texts_survives_the_apy_format(tmp_path):
+    m = apygis.MapFile("T", notes="Flüsse, Brücken")
+    m.layer("h").add_text(0.5, 1.25, 400.0, "Zürich")
+    apygis.write(m, tmp_path / "T", driver="apy")
+    assert apygis.read(tmp_path / "T", driver="apy") == m
