@@ -16,7 +16,11 @@ L_line_points  Point Z       num, code, fwd, back, side1, side2 (-1: none)
 plus a table ``apygis_map`` without geometry (apygis, id, scale, crs, notes,
 layers) for the map header. ``L_lines`` and ``L_areas`` are for GIS users; a
 reader rebuilds the map from ``L_symbols``, ``L_texts`` and ``L_line_points``
-(record for record, point numbers and references included).
+(record for record, point numbers and references included), taking the edits
+a GIS user made to ``L_lines`` / ``L_areas`` (they win over ``L_line_points``,
+which keeps the topology of the lines whose feature still agrees with it) and
+to ``L_symbols`` / ``L_texts``; what was taken is logged (see
+:func:`_line_edits` and docs/formats/ogr.md, "Edited files").
 
 GeoPackage holds all of them in one file, OGR layer names as above. The
 single-layer formats write one file per OGR layer into a directory:
@@ -1549,6 +1553,12 @@ def read(
         Field names for codes and texts in foreign layers (None: not used).
     progress : callable, optional
         ``progress(done, total)`` after each OGR layer.
+
+    Edits a GIS user made to a file apygis wrote are taken: ``L_lines`` /
+    ``L_areas`` win over ``L_line_points`` (deleted, changed and new lines;
+    unchanged ones keep their exact topology), ``L_symbols`` / ``L_texts``
+    features without ``num`` get new numbers. What was taken is logged as one
+    WARNING per map layer (docs/formats/ogr.md, "Edited files").
 
     Returns
     -------
