@@ -421,52 +421,55 @@ def _make_update(cl, cr, refuse):
     d0, d1 = _step_bounds(rzy)
 
     def update(X, Y, Z):
-        dX = X - lXo
-        dY = (Y - lYo) * lyf
-        dZ = Z - lZo
-        den = l13 * dX + l23 * dY + l33 * dZ
-        if not den < 0.0:
+        try:
+            dX = X - lXo
+            dY = (Y - lYo) * lyf
+            dZ = Z - lZo
+            den = l13 * dX + l23 * dY + l33 * dZ
+            if not den < 0.0:
+                refuse(X, Y, Z)
+            f = -lc / den
+            u = f * (l11 * dX + l21 * dY + l31 * dZ)
+            v = f * (l12 * dX + l22 * dY + l32 * dZ)
+            pxl = lsx * dX + u
+            pyl = lsy * dY + v
+            xl = lx0 + u
+            yl = ly0 + v
+            dX = X - rXo
+            dY = (Y - rYo) * ryf
+            dZ = Z - rZo
+            den = r13 * dX + r23 * dY + r33 * dZ
+            if not den < 0.0:
+                refuse(X, Y, Z)
+            f = -rc / den
+            u = f * (r11 * dX + r21 * dY + r31 * dZ)
+            v = f * (r12 * dX + r22 * dY + r32 * dZ)
+            pxr = rsx * dX + u
+            pyr = rsy * dY + v
+            tlx = lck * pxl + lsk * pyl + 0.5
+            tly = lck * pyl - lsk * pxl + 0.5
+            trx = rck * pxr + rsk * pyr + 0.5
+            try_ = rck * pyr - rsk * pxr + 0.5
+            if not tlx * tlx + tly * tly + trx * trx + try_ * try_ < T2 and not (
+                a0 <= tlx < a1 and b0 <= tly < b1 and c0 <= trx < c1 and d0 <= try_ < d1
+            ):
+                refuse(X, Y, Z)
+            return LoopUpdate(
+                xl,
+                yl,
+                rx0 + u,
+                ry0 + v,
+                pxl,
+                pyl,
+                pxr,
+                pyr,
+                lzx + floor(tlx),
+                lzy + floor(tly),
+                rzx + floor(trx),
+                rzy + floor(try_),
+            )
+        except TypeError:  # not numbers (no cost on the fast path)
             refuse(X, Y, Z)
-        f = -lc / den
-        u = f * (l11 * dX + l21 * dY + l31 * dZ)
-        v = f * (l12 * dX + l22 * dY + l32 * dZ)
-        pxl = lsx * dX + u
-        pyl = lsy * dY + v
-        xl = lx0 + u
-        yl = ly0 + v
-        dX = X - rXo
-        dY = (Y - rYo) * ryf
-        dZ = Z - rZo
-        den = r13 * dX + r23 * dY + r33 * dZ
-        if not den < 0.0:
-            refuse(X, Y, Z)
-        f = -rc / den
-        u = f * (r11 * dX + r21 * dY + r31 * dZ)
-        v = f * (r12 * dX + r22 * dY + r32 * dZ)
-        pxr = rsx * dX + u
-        pyr = rsy * dY + v
-        tlx = lck * pxl + lsk * pyl + 0.5
-        tly = lck * pyl - lsk * pxl + 0.5
-        trx = rck * pxr + rsk * pyr + 0.5
-        try_ = rck * pyr - rsk * pxr + 0.5
-        if not tlx * tlx + tly * tly + trx * trx + try_ * try_ < T2 and not (
-            a0 <= tlx < a1 and b0 <= tly < b1 and c0 <= trx < c1 and d0 <= try_ < d1
-        ):
-            refuse(X, Y, Z)
-        return LoopUpdate(
-            xl,
-            yl,
-            rx0 + u,
-            ry0 + v,
-            pxl,
-            pyl,
-            pxr,
-            pyr,
-            lzx + floor(tlx),
-            lzy + floor(tly),
-            rzx + floor(trx),
-            rzy + floor(try_),
-        )
 
     return update
 
