@@ -39,7 +39,13 @@ from apygis.formats._apycommon import (
     encode_latin1,
     m_to_cm,
 )
-from apygis.formats._io import atomic_write_many, check_resolution, read_bytes, stamp_path
+from apygis.formats._io import (
+    atomic_write_many,
+    check_resolution,
+    check_target,
+    read_bytes,
+    stamp_path,
+)
 from apygis.formats._readguard import check_coords, loads_json
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, crs_string
 from apygis.model.records import (
@@ -412,6 +418,8 @@ def write(map_: MapFile, path, progress=None) -> list[Path]:
     base, layers, whole = _split_target(map_, path)
     if not layers:
         raise DriverError(f"{path}: map {map_.id} has no layers: nothing to write")
+    if whole and base.exists():  # dir/ID names the map: a device there is a mistake
+        check_target(base)
     check_resolution(map_, path, 0.01, "APY binary stores coordinates in hundredths of a unit")
     contents = {}
     for k, lay in enumerate(layers):
