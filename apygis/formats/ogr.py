@@ -1132,7 +1132,7 @@ def _line_edits(
     claimed = np.zeros(len(ls), dtype=bool)
     replaced = np.zeros(len(ls), dtype=bool)
     line_of = np.repeat(np.arange(len(ls)), lengths)
-    own_num_line = {int(v): int(k) for v, k in zip(ls.nums[ls.own], line_of[ls.own], strict=True)}
+    schema_opts = {**opts, "code_field": "code", "text_field": None}
     later = []  # (kind, feature, nums): features whose points name no line of lp exactly
     for kind in ("lines", "areas"):
         if kind not in feats:  # no such OGR layer: those lines stay as lp has them
@@ -1152,7 +1152,7 @@ def _line_edits(
                 src.dataset,
                 src.name,
             )
-        ccol = _field(columns, opts["code_field"] or "code")
+        ccol = _field(columns, "code")
         codes = (
             _int_column(ccol, "code", src, nullable=True)
             if ccol is not None
@@ -1205,16 +1205,17 @@ def _line_edits(
         if take.any():
             sub = np.array(wkb, dtype=object)
             sub[~take] = None
-            _foreign_layer(sub, columns, src, acc, opts)
+            _foreign_layer(sub, columns, src, acc, schema_opts)
         report.add(src.name, n_changed, kind[:-1], "changed (topology rebuilt)")
         report.add(src.name, n_added, kind[:-1], "added")
     # points that name no line of lp exactly: a change where they name line points of a
     # line that is not kept, else new
+    own_nums, own_line = ls.nums[ls.own], line_of[ls.own]
     for kind, src, _i, nums in later:
-        hit = {own_num_line[v] for v in nums if v in own_num_line}
-        hit = [k for k in hit if covered[k] and not kept[k]]
+        hit = np.unique(own_line[np.isin(own_nums, nums)])
+        hit = hit[covered[hit] & ~kept[hit]]
         replaced[hit] = True
-        word = "changed (topology rebuilt)" if hit else "added"
+        word = "changed (topology rebuilt)" if len(hit) else "added"
         report.add(src.name, 1, kind[:-1], word)
     drop_line = covered & ~kept
     gone = covered & ~claimed & ~replaced
@@ -1229,7 +1230,8 @@ def _line_edits(
     drop[ls.rows[ls.own & drop_line[line_of]]] = True
     out = lp[~drop].copy()
     dropped = np.setdiff1d(lp["num"][drop], out["num"])
-    where = {int(v): r for r, v in enumerate(lp["num"]) if drop[r]}
+    rows = np.flatnonzero(drop)
+    where = dict(zip(lp["num"][rows].tolist(), rows.tolist(), strict=True))
     relinks = []
     for ref in REF_FIELDS:
         hit = np.isin(out[ref], dropped)
@@ -1273,27 +1275,31 @@ def _relink(lay: Layer, relinks: list, report: _EditReport) -> Layer:
     where there is none, the end grows a new line point there, so the line
     still reaches it as the GIS user saw it.
     """
+    from scipy.spatial import cKDTree
+
     from apygis.model.map import _allocate
+    from apygis.model.topology import lookup
 
     lp = lay.line_points.copy()
-    base = len(lp)
+    tree = cKDTree(np.column_stack([lp["x"], lp["y"]]))
     extra = []
     joined = grown = 0
     for num, ref, xyz in relinks:
-        r = int(np.flatnonzero(lp["num"] == num)[0])
-        here = (
-            np.isclose(lp["x"], xyz[0], rtol=_AGREE_RTOL, atol=_AGREE_ATOL)
-            & np.isclose(lp["y"], xyz[1], rtol=_AGREE_RTOL, atol=_AGREE_ATOL)
-            & (np.arange(len(lp)) != r)
-            & (np.arange(len(lp)) < base)
-        )
-        has_me = here & ((lp["side1"] == num) | (lp["side2"] == num))
-        free = here & ((lp["side1"] == NO_REF) | (lp["side2"] == NO_REF))
-        cands = np.flatnonzero(has_me) if has_me.any() else np.flatnonzero(free)
+        r = int(lookup(lp["num"], np.array([num]))[0])
+        reach = 2 * (_AGREE_ATOL + _AGREE_RTOL * float(np.abs(xyz[:2]).max()))
+        near = np.array(sorted(tree.query_ball_point(xyz[:2], reach)), dtype=np.int64)
+        near = near[near != r]
+        here = near[
+            np.isclose(lp["x"][near], xyz[0], rtol=_AGREE_RTOL, atol=_AGREE_ATOL)
+            & np.isclose(lp["y"][near], xyz[1], rtol=_AGREE_RTOL, atol=_AGREE_ATOL)
+        ]
+        has_me = here[(lp["side1"][here] == num) | (lp["side2"][here] == num)]
+        free = here[(lp["side1"][here] == NO_REF) | (lp["side2"][here] == NO_REF)]
+        cands = has_me if len(has_me) else free
         if len(cands):
             t = int(cands[0])
             lp[ref][r] = lp["num"][t]
-            if not has_me.any():
+            if not len(has_me):
                 side = "side1" if lp["side1"][t] == NO_REF else "side2"
                 lp[side][t] = num
             joined += 1
