@@ -364,6 +364,30 @@ def test_copied_features_get_new_numbers(sample_map, tmp_path, caplog):
     assert _polylines(h)[_key(copy)][0] > 112
 
 
+def test_code_changed_rebuilds_the_line(sample_map, tmp_path, caplog):
+    gpkg = tmp_path / "m.gpkg"
+    apygis.write(sample_map, gpkg)
+    h0 = sample_map.layers["h"]
+    g = Gpkg(gpkg)
+    fid = g.fid("h_lines", "points", "92,93,94,95,96,97,98,99,100,70")
+    g.update("h_lines", fid, code=34)
+    line = g.geometry("h_lines", fid)
+    g.close()
+    with caplog.at_level(logging.WARNING, logger="apygis.formats.ogr"):
+        h = apygis.read(gpkg).layers["h"]
+    (msg,) = _edit_report(caplog)
+    assert msg.endswith("edits taken: 1 line changed (topology rebuilt) (from h_lines)")
+    assert not h.validate()
+    nums = _polylines(h)[_key(line)]
+    assert nums[-1] == 70  # a branch of 70 again
+    lp = h.line_points
+    assert set(lp[np.isin(lp["num"], nums[:-1])]["code"].tolist()) == {34}
+    kept = set(range(1, 92)) | set(range(101, 113))
+    want = _rows(h0, kept)
+    want[70] = (*want[70][:7], nums[-2], want[70][8])  # side1: the rebuilt line's end
+    assert _rows(h, kept) == want
+
+
 def test_line_points_edited_alone_lose_to_lines(sample_map, tmp_path, caplog):
     """A line point moved in L_line_points while L_lines is unchanged: L_lines wins."""
     gpkg = tmp_path / "m.gpkg"
