@@ -484,9 +484,7 @@ def write(
     if decimals is None:
         decimals = _auto_decimals(map_)
     _check_options(dims, decimals)
-    check_resolution(
-        map_, path, 10.0**-decimals, f"GENERATE is written with {decimals} decimals"
-    )
+    check_resolution(map_, path, 10.0**-decimals, f"GENERATE is written with {decimals} decimals")
     contents = _contents(map_, path, dims, decimals)
     if progress:
         progress(1, 2)
@@ -496,9 +494,7 @@ def write(
     stale = [f for f in stale if f not in contents and f.is_file()]
     for f in stale:
         log.info("removing %s: the map no longer has these records", f)
-    written = atomic_write_many(
-        contents, stamp_path(base), complete=True, remove=stale
-    )
+    written = atomic_write_many(contents, stamp_path(base), complete=True, remove=stale)
     if progress:
         progress(2, 2)
     return written

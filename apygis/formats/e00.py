@@ -1411,9 +1411,7 @@ def _lines_to_map(info, tables, mp: MapFile, default: str, path, tol: float) -> 
     keep = [k for k in range(len(lines)) if len(lines[k])]
     layer = mp.layer(default)
     trial = layer.copy()
-    add_lines(
-        trial, [lines[k] for k in keep], [int(codes[k]) for k in keep], None, tol, crs=mp.crs
-    )
+    add_lines(trial, [lines[k] for k in keep], [int(codes[k]) for k in keep], None, tol, crs=mp.crs)
     errors = [i for i in topology.validate_line_points(trial.line_points) if i.severity == "error"]
     if errors:
         log.warning(

@@ -636,8 +636,7 @@ def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = 
         except DriverError as exc:  # GDAL's own message; a full disk gives odd SQLite errors
             if _disk_full(tmp):
                 raise WriteError(
-                    f"{target if fmt.multi else directory}: cannot write: "
-                    "no space left on device"
+                    f"{target if fmt.multi else directory}: cannot write: no space left on device"
                 ) from None
             raise exc from None
         pairs = [(tmp / n, check_target(directory / n), directory / n) for n in made]
