@@ -39,7 +39,10 @@ def _layer_map(ctx, param, value):
 @click.option("--to-crs", help="Reproject to this CRS (EPSG:XXXX, WKT, PROJ string).")
 @click.option("--layer-map", callback=_layer_map, help="Input layer to map layer: ROADS=r,WATER=h.")
 @click.option(
-    "--snap", type=float, help="Tolerance in metres for rebuilding line topology on import."
+    "--snap",
+    type=float,
+    help="Tolerance in metres on the ground for rebuilding line topology on import "
+    "(converted to feet or degrees for a source in such a CRS).",
 )
 @click.option("-j", "--jobs", type=click.IntRange(1), default=1, help="Parallel processes.")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files.")
@@ -52,7 +55,9 @@ def convert(paths, to_format, driver, src_driver, to_crs, layer_map, snap, jobs,
       apygis convert --to gpkg -j 2 'in/*.dxf' in/ZH1091 out/
 
     An APY native map is named dir/ID (all layer files dir/ID.*) or dir/ID.ext
-    (one layer). Nothing is overwritten without --overwrite. In batch mode a
+    (one layer). Nothing is overwritten without --overwrite, and only regular
+    files are (a symlink is written through). A format that cannot hold the
+    coordinates (centimetre formats in degrees) refuses. In batch mode a
     file that fails is reported and the others go on; the exit code is 1 if
     any failed.
     """

@@ -102,3 +102,22 @@ def test_single_conversion_reports_progress(sample_dir, tmp_path):
     assert seen == sorted(seen)
     assert seen[0] > 0
     assert seen[-1] == 1.0
+
+
+def test_batch_failure_on_a_full_disk_names_the_target(sample_dir, tmp_path, monkeypatch):
+    import errno
+    import os
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "fsync", full)
+    out = tmp_path / "out"
+    res = _run("convert", "--to", "ascii", sample_dir / "ZH1091", sample_dir / "ZH1091.c", out)
+    monkeypatch.undo()
+    assert res.exit_code == 1
+    failed = [ln for ln in res.output.splitlines() if ln.startswith("FAILED")]
+    assert len(failed) == 2
+    assert f"{out / 'ZH1091.apa'}: cannot write: no space left on device" in failed[0]
+    assert f"{out / 'ZH1091.c.apa'}: cannot write: no space left on device" in failed[1]
+    assert list(out.iterdir()) == []  # nothing half-written

@@ -139,3 +139,47 @@ def test_a_line_touching_two_lines_is_joined_at_both_ends(connector):
     junctions = sorted(b["junction"] for b in lay.branches())
     assert junctions == [2, 5]
     assert lay.validate() == []
+
+
+# ------------------------------------------------------------------ tolerances in CRS units
+
+
+def test_tolerance_in_crs_units():
+    from apygis.model.build import metres_per_unit_at, tolerance_in_crs
+
+    assert tolerance_in_crs(0.005, None) == 0.005
+    assert tolerance_in_crs(0.005, "EPSG:2056") == 0.005
+    assert tolerance_in_crs(0.3048, "EPSG:2229") == pytest.approx(0.3048 / (1200 / 3937))  # US ft
+    east, north = metres_per_unit_at("EPSG:4326", 0.0)
+    assert east == pytest.approx(111_319.49, abs=0.01)  # a degree of the equator
+    assert north == pytest.approx(110_574.3, abs=0.1)  # of the meridian at the equator
+    # the shorter of the two: latitude at the equator, longitude in the north
+    assert tolerance_in_crs(1.0, "EPSG:4326", 0.0) == pytest.approx(1 / north)
+    east60, _ = metres_per_unit_at("EPSG:4326", 60.0)
+    assert east60 == pytest.approx(55_799.98, abs=0.5)
+    assert tolerance_in_crs(1.0, "EPSG:4326", 60.0) == pytest.approx(1 / east60)
+
+
+@pytest.mark.parametrize(("gap_m", "joined"), [(300.0, False), (0.004, True), (0.006, False)])
+def test_add_lines_tolerance_is_metres_in_a_geographic_crs(gap_m, joined):
+    """At 60° N a degree of longitude is 55.8 km: 0.005 is 5 mm, never 0.005 degrees."""
+    from apygis.model.build import metres_per_unit_at
+
+    east, _ = metres_per_unit_at("EPSG:4326", 60.0)
+    d = gap_m / east
+    lay = apygis.MapFile("G", crs="EPSG:4326").layer("r")
+    add_lines(
+        lay,
+        [[(10.0, 60.0), (10.001, 60.0)], [(10.001 + d, 60.0), (10.002, 60.0)]],
+        11,
+        tolerance_m=0.005,
+        crs="EPSG:4326",
+    )
+    assert len(lay.chains()) == (1 if joined else 2)
+    assert len(lay.line_points) == (3 if joined else 4)
+
+
+def test_add_lines_refuses_a_negative_tolerance():
+    lay = apygis.MapFile("G").layer("r")
+    with pytest.raises(RecordError, match="tolerance is a distance in metres"):
+        add_lines(lay, [[(0, 0), (1, 0)]], 11, tolerance_m=-1.0)
