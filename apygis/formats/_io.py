@@ -171,8 +171,8 @@ def remove_stale_temps(directory, names: Iterable[str] | None = None) -> list[Pa
                 continue
         pid = int(m["pid"]) if "pid" in m.re.groupindex else None
         if pid is not None and _alive(pid):
-            if pid != os.getpid():
-                log.warning("%s: left alone, still being written by process %d", e.path, pid)
+            if pid != os.getpid():  # a parallel job writing beside us: not a leftover
+                log.info("%s: left alone, still being written by process %d", e.path, pid)
             continue
         try:
             size = _tree_size(Path(e.path)) if is_dir else e.stat(follow_symlinks=False).st_size
