@@ -468,7 +468,7 @@ def _make_update(cl, cr, refuse):
                 rzx + floor(trx),
                 rzy + floor(try_),
             )
-        except TypeError:  # not numbers (no cost on the fast path)
+        except (TypeError, ValueError, OverflowError):  # not float numbers (no cost when fine)
             refuse(X, Y, Z)
 
     return update

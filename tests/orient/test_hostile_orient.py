@@ -403,8 +403,9 @@ def test_loop_motor_range_edges(step_um):
 
 def test_loop_refuses_non_numbers():
     loop = _loop()
-    with pytest.raises(MarkPositionError, match="numbers"):
-        loop.update("a", 1.0, 2.0)
+    for bad in ("a", 10**400, np.zeros(2)):
+        with pytest.raises(MarkPositionError, match="numbers"):
+            loop.update(bad, 1.0, 2.0)
     with pytest.raises(MarkPositionError, match="numbers"):
         loop.update_many([["a", 1.0, 2.0]])
 
