@@ -364,7 +364,14 @@ def control_for(ids, control, photo_id: str | None = None, *, need_z: bool = Tru
     for i in ids:
         if i not in control:
             raise MeasurementError(f"measured point {i}{ctx} is not in the control")
-        X, Y, Z = control[i]
+        try:
+            X, Y, Z = (float(v) for v in control[i])
+        except (TypeError, ValueError, OverflowError):
+            raise MeasurementError(
+                f"control point {i}{ctx} must be three numbers (X, Y, Z), got {control[i]!r:.80}"
+            ) from None
+        if not (math.isfinite(X) and math.isfinite(Y)):
+            raise MeasurementError(f"control point {i}{ctx} needs finite X and Y")
         if need_z and not math.isfinite(Z):
             raise MeasurementError(f"control point {i}{ctx} has no height (Z '-')")
         rows.append((X, Y, Z))

@@ -525,8 +525,8 @@ def fit_map_transform(
         )
     try:
         G = np.array([[float(control[p][0]), float(control[p][1])] for p in order])
-    except (TypeError, ValueError, IndexError):
-        raise MeasurementError("control coordinates must be pairs of numbers") from None
+    except (TypeError, ValueError, IndexError, OverflowError):
+        raise MeasurementError("control coordinates must be pairs of finite numbers") from None
     if not np.all(np.isfinite(G)):
         raise MeasurementError("control coordinates must be finite")
 

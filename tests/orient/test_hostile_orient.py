@@ -30,7 +30,7 @@ from apygis.orient.collinearity import (
     depth,
     ground_to_photo,
 )
-from apygis.orient.io import dumps, load_orientation, loads
+from apygis.orient.io import Orientation, dumps, load_orientation, loads
 from apygis.orient.photo import approximate_orientation, orient_photo
 from apygis.orient.readers import (
     read_control,
@@ -618,6 +618,24 @@ def test_singular_map_transform_refused():
     line = {k: (2683000.0 + i, 1247000.0 + i) for i, k in enumerate(CTRL4)}
     with pytest.raises(ApygisError, match="collinear"):
         fit_map_transform(list(CTRL4), tab, line, "affine")
+
+
+def test_library_refuses_huge_python_ints():
+    """Integers beyond a double reach no float() or math.isfinite unguarded."""
+    from apygis.orient.readers import control_for
+
+    huge = {**CTRL4, "1": (10**400, 1247000.0)}
+    tab = np.array([[100, 100], [300, 100.1], [100.2, 300], [301, 300]], dtype=float)
+    with pytest.raises(ApygisError, match="finite numbers"):
+        fit_map_transform(list(CTRL4), tab, huge, "affine")
+    with pytest.raises(ApygisError, match="three numbers"):
+        control_for(["1"], {"1": (1.0, 2.0, 10**400)})
+    with pytest.raises(ApygisError, match="huge integer"):
+        ExteriorOrientation(10**400, 0.0, 0.0)
+    d = _truth_doc()
+    d["photos"][0]["Zo"] = 10**400
+    with pytest.raises(FormatError, match="'Zo' must be a number, got a huge integer"):
+        Orientation.from_dict(d)
 
 
 def test_dumps_round_trip_of_hostile_free_document():
