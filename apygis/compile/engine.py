@@ -288,6 +288,7 @@ class Engine:
         self.coarse = False
         self.view = "map"
         self._undo: list[tuple] = []
+        self._snaps = 0  # snapshots taken: an edit that fails after its snapshot drops it
 
     # ------------------------------------------------------------------ helpers
 
@@ -315,6 +316,13 @@ class Engine:
         state = (self.line_first, self.line_end, self.sampling, self.last_inside)
         self._undo.append((self.layer_ext, self.layer.copy(), state))
         del self._undo[: -self.undo_depth]
+        self._snaps += 1
+
+    def _restore(self, snapshot) -> None:
+        ext, layer, state = snapshot
+        self.map.add_layer(layer)
+        self.layer_ext = ext
+        self.line_first, self.line_end, self.sampling, self.last_inside = state
 
     def _entry(self, out: list) -> None:
         self.entries += 1
@@ -393,9 +401,12 @@ class Engine:
             self.buf = ""
         else:
             handler = getattr(self, f"_mode_{self.mode}")
+            snaps = self._snaps
             try:
                 handler(b, out)
             except ApygisError as exc:  # an edit the model refused: tell, do not crash
+                if self._snaps != snaps:  # it had begun: take it back whole, keep no undo step
+                    self._restore(self._undo.pop())
                 out.append(Message(str(exc)))
         out.append(self._status(self.buf))
         return out
@@ -426,11 +437,8 @@ class Engine:
         if not self._undo:
             out.append(Message("nothing to undo"))
             return
-        ext, layer, state = self._undo.pop()
-        self.map.add_layer(layer)
-        self.layer_ext = ext
-        self.line_first, self.line_end, self.sampling, self.last_inside = state
-        out.append(Undone(ext))
+        self._restore(self._undo.pop())
+        out.append(Undone(self.layer_ext))
         out.append(Message("last entry undone"))
         self._entry(out)
 
@@ -574,7 +582,7 @@ class Engine:
 
     def _mode_line(self, b: str, out: list) -> None:
         if b == "ENTER":
-            if self._need_mark(out):
+            if self._need_mark(out) and self._capacity_ok("line_points", out):
                 self._snapshot()
                 self._add_point(self.mark(), out)
         elif b == "SEARCH":
@@ -636,6 +644,8 @@ class Engine:
             self.last_inside = (mx, my, mz)
             return
         point = self.last_inside or (mx, my, mz)
+        if not self._capacity_ok("line_points", out):
+            return
         self._snapshot()
         self._add_point(point, out)
         if point != (mx, my, mz):
