@@ -48,6 +48,7 @@ __all__ = [
     "check_target",
     "commit",
     "crs_unit",
+    "diagnose_write_failure",
     "make_temp_dir",
     "metres_per_unit",
     "read_bytes",
@@ -93,6 +94,36 @@ def write_failed(target, exc: OSError, what: str = "cannot write") -> WriteError
     err.errno = exc.errno
     err.filename = str(target)
     return err
+
+
+def diagnose_write_failure(folder) -> OSError | None:
+    """The ``OSError`` behind a library's failed write into ``folder``, where one can be told.
+
+    GDAL and SQLite report a full disk as whatever failed next ("no such
+    table: gpkg_contents", "failed to commit transaction"). This looks at the
+    file system of ``folder`` (no space left) and at the process's file size
+    limit (``ulimit -f``) against the files written there. None: neither.
+    """
+    import resource
+
+    d = Path(folder)
+    try:
+        st = os.statvfs(d)
+        if st.f_bavail * st.f_frsize < 64 * 1024:
+            return OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        if st.f_favail == 0 and st.f_files:
+            return OSError(errno.ENOSPC, "no free inodes left on device")
+    except OSError:
+        pass
+    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    if soft != resource.RLIM_INFINITY:
+        with contextlib.suppress(OSError):
+            biggest = max((p.stat().st_size for p in d.rglob("*") if p.is_file()), default=0)
+            if biggest + 64 * 1024 >= soft:
+                return OSError(
+                    errno.EFBIG, f"File too large (the process's file size limit is {soft} bytes)"
+                )
+    return None
 
 
 # --------------------------------------------------------------------------- targets

@@ -54,11 +54,12 @@ from pathlib import Path
 
 import numpy as np
 
-from apygis.errors import DriverError, FormatError, WriteError
+from apygis.errors import DriverError, FormatError
 from apygis.formats import Driver
 from apygis.formats._io import (
     check_target,
     commit,
+    diagnose_write_failure,
     make_temp_dir,
     remove_stale_temps,
     stamp_entries,
@@ -634,10 +635,9 @@ def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = 
         except OSError as exc:
             raise write_failed(target if fmt.multi else directory, exc) from None
         except DriverError as exc:  # GDAL's own message; a full disk gives odd SQLite errors
-            if _disk_full(tmp):
-                raise WriteError(
-                    f"{target if fmt.multi else directory}: cannot write: no space left on device"
-                ) from None
+            cause = diagnose_write_failure(tmp)
+            if cause is not None:
+                raise write_failed(target if fmt.multi else directory, cause) from None
             raise exc from None
         pairs = [(tmp / n, check_target(directory / n), directory / n) for n in made]
         entries = stamp_entries({n: tmp / n for n in made})
@@ -646,15 +646,6 @@ def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = 
         return [directory / n for n in made]
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-
-
-def _disk_full(p: Path) -> bool:
-    """True when the file system of ``p`` has (almost) no space left."""
-    try:
-        st = os.statvfs(p)
-    except OSError:
-        return False
-    return st.f_bavail * st.f_frsize < 64 * 1024
 
 
 def _write_tables(

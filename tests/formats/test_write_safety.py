@@ -274,6 +274,45 @@ def test_a_full_disk_names_the_target_and_leaves_the_old_file(
     assert after == before  # the old files as they were, nothing half-written beside them
 
 
+_CLI = "import sys; from apygis.cli import main; sys.argv[0] = 'apygis'; main()"
+
+
+def _file_size_limit(limit):
+    def set_limit():  # in the child: writes past the limit fail with EFBIG, no SIGXFSZ kill
+        import resource
+        import signal
+
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    return set_limit
+
+
+@pytest.mark.parametrize(
+    ("driver", "name", "limit"),
+    [("gpkg", "M.gpkg", 60_000), ("shp", "out", 2_000), ("dxf", "M.dxf", 60_000)],
+)
+def test_a_real_write_failure_in_gdal_or_python_names_the_target(
+    sample_dir, tmp_path, driver, name, limit
+):
+    """GDAL and SQLite meet a real OSError (the file size limit, as a full disk would be)."""
+    target = tmp_path / name
+    proc = subprocess.run(
+        [sys.executable, "-c", _CLI, "convert", sample_dir / "ZH1091", target, "--driver", driver],
+        preexec_fn=_file_size_limit(limit),
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 1, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith(f"Error: {target}"), lines[0]
+    assert "cannot write: file too large" in lines[0]
+    assert list(tmp_path.iterdir()) == ([target] if driver == "shp" else [])
+    if driver == "shp":  # the folder is made, nothing in it
+        assert list(target.iterdir()) == []
+
+
 def test_gpkg_on_a_full_disk_says_so(sample_map, tmp_path, monkeypatch):
     import pyogrio.errors
     import pyogrio.raw
