@@ -389,7 +389,9 @@ def commit(
             files.update(entries or {})
             # what each touched file is now (null: none), so that a reader can tell
             # the files this write replaced from those it did not get to
-            before = {}
+            # a partial write keeps what the last stamp knew of the other files, so
+            # that an earlier interrupted write is not hidden by this one
+            before = {} if complete or old is None else dict(old.get("before", {}))
             for real in [real for _, real, _ in pairs] + remove:
                 try:
                     before[real.name] = _file_entry(real) if real.is_file() else None

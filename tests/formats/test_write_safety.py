@@ -356,3 +356,30 @@ def test_the_stamp_lists_the_set(sample_map, tmp_path):
     apygis.write(one, tmp_path / "M.r")
     back = apygis.read(tmp_path / "M")
     np.testing.assert_array_equal(back.layers["r"].symbols["x"], t["x"])
+
+
+def test_writing_one_layer_does_not_hide_an_interrupted_write(sample_map, tmp_path, monkeypatch):
+    old, new = _old_and_new(sample_map)
+    apygis.write(old, tmp_path / "M")
+    real_replace = os.replace
+    done = [0]
+
+    def crashing(a, b):
+        if done[0] >= 3:  # the stamp, M.e, M.h in place; M.r, M.x not; M.c not removed
+            raise OSError(errno.EIO, "Input/output error")
+        done[0] += 1
+        return real_replace(a, b)
+
+    monkeypatch.setattr(os, "replace", crashing)
+    with pytest.raises(WriteError, match=r"2 of 4 files of the set were replaced"):
+        apygis.write(new, tmp_path / "M")
+    monkeypatch.undo()
+    with pytest.raises(FormatError, match=r"M.e, M.h are new, but M.c, M.r, M.x are still"):
+        apygis.read(tmp_path / "M")
+    one = apygis.MapFile(new.id, new.scale, new.crs, new.notes)
+    one.add_layer(new.layers["r"])
+    apygis.write(one, tmp_path / "M.r")  # one layer: the others are still a mix
+    with pytest.raises(FormatError, match=r"M.e, M.h, M.r are new, but M.c, M.x are still"):
+        apygis.read(tmp_path / "M")
+    apygis.write(new, tmp_path / "M")
+    assert _sig(apygis.read(tmp_path / "M")) == _sig(new)
