@@ -235,7 +235,7 @@ def add_lines(
     layer : Layer
         The layer to add to; its existing line points can be junctions.
     lines : iterable of array-like (n, 2) or (n, 3)
-        Vertices in metres; a missing Z is 0.
+        Vertices in the units of ``crs`` (metres without one); a missing Z is 0.
     codes : int or iterable of int
         Line code (0-99) per line, or one for all.
     closed : iterable of bool, optional
