@@ -11,8 +11,16 @@ Files of a session on the map ``dir/ID``:
 
 * ``dir/ID.<ext>``: the APY layer files (read at the start, saved);
 * ``dir/ID.journal``: the journal, removed when the session terminates
-  cleanly; a session started on a map with a journal recovers it first;
+  cleanly; a session started on a map with a journal recovers it first, if
+  the layer files are still in a state the journal knows
+  (:func:`~apygis.compile.journal.check_files`);
+* ``dir/ID.lock``: the session's lock (:class:`SessionLock`): one session
+  per map, taken before anything is read, removed at the end;
 * ``dir/ID-margin.apa``: the margin file (APY ASCII), written at the end.
+
+A failed save (a full disk) does not end the session: the operator is told,
+the journal still holds every entry, and the next save tries again; only a
+failed final save is an error (:class:`SaveError`), with the journal kept.
 
 The session never prints: it hands the operator's monitor lines to a
 ``monitor`` callback (the CLI prints them).
@@ -20,6 +28,7 @@ The session never prints: it hands the operator's monitor lines to a
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -557,7 +566,8 @@ class Session:
         except BaseException:
             self._closed = True
             try:
-                self.journal.close(remove=False)
+                with contextlib.suppress(JournalWriteError):  # the save's error says more
+                    self.journal.close(remove=False)
             finally:
                 self.lock.release()
             raise
