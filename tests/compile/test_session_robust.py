@@ -281,7 +281,7 @@ def _bad_recording(tmp_path):
 @pytest.mark.parametrize(
     "case",
     ["pad", "pad-superscript", "port", "tablet-nocolon", "tablet-protocol", "recording",
-     "motors", "layer"],
+     "motors", "layer", "orientation"],
 )  # fmt: skip
 @pytest.mark.parametrize("earlier", [False, True])
 def test_a_failed_start_leaves_everything_as_it_was(tmp_path, case, earlier):
@@ -304,6 +304,8 @@ def test_a_failed_start_leaves_everything_as_it_was(tmp_path, case, earlier):
                       "-o", out, "--overwrite"],
         "motors": _replay_args(out, "--motors", "grbl:socket://127.0.0.1:1", "--overwrite"),
         "layer": _replay_args(out, "--layer", "road", "--overwrite"),
+        "orientation": [src, "--orientation", pad, "--replay", RECORDING, "-o", out,
+                        "--overwrite"],
     }[case]  # fmt: skip
     needle = {
         "pad": "p.pad: line 1: unknown button 'JUMP'",
@@ -314,6 +316,7 @@ def test_a_failed_start_leaves_everything_as_it_was(tmp_path, case, earlier):
         "recording": "bad.rec: line 1: 'counts_per_mm' must be a number",
         "motors": "127.0.0.1:1",
         "layer": "--layer",
+        "orientation": "p.pad",
     }[case]
     _one_line_error(_cli(*args), needle)
     assert _snapshot(out) == before  # no copy, no journal, no lock file, no re-saved layer
