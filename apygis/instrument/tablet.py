@@ -164,17 +164,25 @@ class TabletConfig:
 
     def __post_init__(self):
         cpm = self.counts_per_mm
-        if not (isinstance(cpm, int | float) and math.isfinite(cpm) and cpm > 0):
-            raise ProtocolError(f"counts_per_mm must be a positive number, not {cpm!r}")
+        # compared before anything converts it: a 400-digit integer must not reach float()
+        if not (isinstance(cpm, int | float) and not isinstance(cpm, bool) and 0 < cpm <= 1e9):
+            raise ProtocolError(f"counts_per_mm must be a positive number, not {cpm!r:.40}")
         for name in ("x_range", "y_range"):
             rng = getattr(self, name)
             if rng is not None:
+                if not (
+                    isinstance(rng, tuple | list)
+                    and len(rng) == 2
+                    and all(_is_count(v) for v in rng)
+                ):
+                    raise ProtocolError(f"{name} must be (low, high) in counts, not {rng!r:.60}")
                 lo, hi = rng
                 if lo > hi:
                     raise ProtocolError(f"{name} {rng!r}: the low end is above the high end")
                 object.__setattr__(self, name, (int(lo), int(hi)))
-        if not 0 <= self.max_button <= 31:
-            raise ProtocolError(f"max_button must be 0-31, not {self.max_button!r}")
+        mb = self.max_button
+        if not (_is_count(mb) and 0 <= mb <= 31):
+            raise ProtocolError(f"max_button must be 0-31, not {mb!r:.40}")
 
     @classmethod
     def from_lpi(cls, lpi: float, **kwargs) -> TabletConfig:
@@ -202,6 +210,18 @@ class TabletConfig:
     def report_mm(self, report: Report) -> tuple[float, float]:
         """A report's position in tablet millimetres."""
         return report.x_counts / self.counts_per_mm, report.y_counts / self.counts_per_mm
+
+
+def _is_count(v) -> bool:
+    """A finite real number that fits the counts of any tablet (numpy numbers too)."""
+    import numbers
+
+    return (
+        isinstance(v, numbers.Real)
+        and not isinstance(v, bool)
+        and math.isfinite(v)
+        and abs(v) <= 1 << 62
+    )
 
 
 _DEFAULT_CONFIG = TabletConfig()

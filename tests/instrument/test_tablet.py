@@ -259,6 +259,16 @@ def test_reset_forgets_partial():
         lambda: AsciiParser(width=0),
         lambda: TabletConfig(counts_per_mm=0),
         lambda: TabletConfig(x_range=(5, 1)),
+        # wrong types and absurd values: a ProtocolError, never TypeError or OverflowError
+        lambda: TabletConfig(counts_per_mm=True),
+        lambda: TabletConfig(counts_per_mm="40"),
+        lambda: TabletConfig(counts_per_mm=10**400),
+        lambda: TabletConfig(counts_per_mm=float("inf")),
+        lambda: TabletConfig(max_button="27"),
+        lambda: TabletConfig(x_range=("a", 1)),
+        lambda: TabletConfig(x_range=5),
+        lambda: TabletConfig(y_range=(0, float("nan"))),
+        lambda: make_parser(5),
     ],
 )
 def test_errors(call):
