@@ -6,14 +6,29 @@ the APY ones are here, other drivers put theirs in a module
 ``fn(tmp_path) -> (bytes, file name)``. A driver without one fails
 ``test_every_reader_has_a_seed``.
 Mutations are seeded, so a failure is reproducible from the printed case.
+
+The corpus ``tests/fuzz_corpus/<driver>/`` holds inputs that once broke a
+reader (nested JSON, counts of 10**12, superscript digits, coordinates of
+1e308, ...) and each driver's seeds: every file there is read by its driver
+on every run (``test_corpus_file``), under a time limit, and may only raise
+ApygisError. Mutations start from the seed or from a corpus file. An input
+the mutations find that breaks a reader is saved into the corpus before the
+test fails (``APYGIS_FUZZ_SAVE=0`` turns that off); fix the reader and commit
+the file. ``APYGIS_FUZZ_CASES`` and ``APYGIS_FUZZ_SEED`` run more or other
+cases to grow it; see ``tests/fuzz_corpus/README.md``.
 """
 
 from __future__ import annotations
 
+import hashlib
 import importlib
+import os
 import pkgutil
+import shutil
+import signal
 import struct
 import zlib
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +39,12 @@ from apygis.errors import ApygisError
 from apygis.formats import drivers
 from tests.formats import strategies
 
-N_CASES = 1200
+N_CASES = int(os.environ.get("APYGIS_FUZZ_CASES", "1200"))
+RNG_SEED = int(os.environ.get("APYGIS_FUZZ_SEED", "20261122"))
+CORPUS = Path(__file__).parent / "fuzz_corpus"
+TIME_LIMIT_S = 30  # per input: a hang guard, not a benchmark (the inputs take well under 5 s)
+# files read together with the primary file of the same stem, not on their own
+COMPANIONS = {"generate": (".csv", ".prj")}
 
 
 def _seed_apy(tmp_path):
@@ -104,31 +124,156 @@ def mutate(data: bytes, rng: np.random.Generator) -> bytes:
     return bytes(b)
 
 
+def _readers() -> set[str]:
+    return {name for name, d in drivers().items() if "r" in d.modes}
+
+
 def test_every_reader_has_a_seed():
-    readers = {name for name, d in drivers().items() if "r" in d.modes}
+    readers = _readers()
     assert readers <= set(SEEDS), f"add fuzz seeds for: {sorted(readers - set(SEEDS))}"
+
+
+def _corpus_files(driver: str) -> list[Path]:
+    """The inputs of ``tests/fuzz_corpus/<driver>/`` (companion files excluded)."""
+    folder = CORPUS / driver
+    if not folder.is_dir():
+        return []
+    skip = COMPANIONS.get(driver, ())
+    return sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() not in skip)
+
+
+def _corpus_cases() -> list:
+    return [
+        pytest.param(d, p, id=f"{d}/{p.name}")
+        for d in sorted(_readers() | {p.name for p in CORPUS.iterdir() if p.is_dir()})
+        for p in _corpus_files(d)
+    ]
+
+
+def test_every_reader_has_a_corpus():
+    """Each reader's corpus folder holds at least its seeds, and no folder lacks a reader."""
+    folders = {p.name for p in CORPUS.iterdir() if p.is_dir()}
+    assert folders <= _readers(), f"corpus folders without a reader: {folders - _readers()}"
+    for d in sorted(_readers()):
+        names = [p.name for p in _corpus_files(d)]
+        assert any(n.startswith("seed-") for n in names), f"{CORPUS / d}: no seed- file"
+
+
+@contextmanager
+def _time_limit(seconds: int, what: str):
+    """Fail instead of hanging: SIGALRM interrupts the reader (main thread, POSIX)."""
+    if not hasattr(signal, "SIGALRM"):  # pragma: no cover - Windows: no guard
+        yield
+        return
+
+    def _timeout(signum, frame):
+        raise TimeoutError(f"{what}: still reading after {seconds} s")
+
+    old = signal.signal(signal.SIGALRM, _timeout)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
+@pytest.mark.parametrize(("driver", "path"), _corpus_cases())
+def test_corpus_file(driver, path, tmp_path):
+    """Every corpus file is read by its driver: a map or an ApygisError, in time.
+
+    A map that was read is written as APY ASCII, which may refuse it (an
+    ApygisError) but not crash: a reader must not return strings that cannot
+    be encoded.
+    """
+    assert driver in _readers(), f"{path}: no reader named {driver!r}"
+    for f in path.parent.iterdir():  # the file and its companions (GENERATE's CSV)
+        if f.stem == path.stem and f.is_file():
+            shutil.copyfile(f, tmp_path / f.name)
+    message = None
+    try:
+        with _time_limit(TIME_LIMIT_S, str(path)), _memory_limit():
+            m = drivers()[driver].reader(str(tmp_path / path.name))
+            # what a reader accepts can be written (no lone surrogates in notes or texts)
+            apygis.write(m, tmp_path / "written" / "back.apa")
+    except ApygisError as exc:
+        message = str(exc)
+    if message is not None:  # one line for the CLI, saying something
+        assert message.strip()
+        assert "\n" not in message.strip(), message
+
+
+@contextmanager
+def _memory_limit(extra: int = 4 << 30):
+    """Refuse allocations beyond ``extra`` bytes more address space (Linux): a reader that
+    asks for 116 TiB or touches 23 GB gets a MemoryError here, not the machine's OOM killer."""
+    try:
+        import resource
+
+        with open("/proc/self/status") as fh:
+            vm = next(int(ln.split()[1]) * 1024 for ln in fh if ln.startswith("VmSize:"))
+        old = resource.getrlimit(resource.RLIMIT_AS)
+        cap = vm + extra if old[1] == resource.RLIM_INFINITY else min(vm + extra, old[1])
+        resource.setrlimit(resource.RLIMIT_AS, (cap, old[1]))
+    except (ImportError, OSError, StopIteration, ValueError):  # pragma: no cover - not Linux
+        yield
+        return
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, old)
+
+
+def _save_crash(driver: str, fname: str, data: bytes) -> Path | None:
+    """Keep an input that broke a reader in the corpus; None if saving is off or fails."""
+    if os.environ.get("APYGIS_FUZZ_SAVE", "1") == "0":
+        return None
+    path = CORPUS / driver / f"crash-{hashlib.sha1(data).hexdigest()[:12]}-{fname}"
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+    except OSError:  # pragma: no cover - a read-only checkout
+        return None
+    return path
 
 
 @pytest.mark.parametrize("name", sorted(SEEDS))
 def test_reader_survives_fuzzing(name, tmp_path):
     seed, fname = SEEDS[name](tmp_path)
     reader = drivers()[name].reader
-    rng = np.random.default_rng(20261122)
+    rng = np.random.default_rng(RNG_SEED)
     target = tmp_path / "case" / fname
     target.parent.mkdir()
     outcomes = {"ok": 0, "error": 0}
+
+    def attempt(case, data: bytes) -> None:
+        target.write_bytes(data)
+        try:
+            with _time_limit(TIME_LIMIT_S, f"case {case}"), _memory_limit():
+                reader(str(target))
+            outcomes["ok"] += 1
+        except ApygisError:
+            outcomes["error"] += 1
+        except Exception as exc:  # pragma: no cover - the failure report
+            saved = _save_crash(name, fname, data)
+            where = f"\nsaved as {saved}: commit it with the fix" if saved else ""
+            pytest.fail(f"case {case}: {type(exc).__name__}: {exc}\ninput: {data[:200]!r}{where}")
+
     for case in range(N_CASES):
         data = mutate(seed, rng)
         if rng.random() < 0.5:
             data = mutate(data, rng)
         if name == "apy" and rng.random() < 0.6:
             data = _fix_apy_crc(data)  # get past the checksum to the field checks
-        target.write_bytes(data)
-        try:
-            reader(str(target))
-            outcomes["ok"] += 1
-        except ApygisError:
-            outcomes["error"] += 1
-        except Exception as exc:  # pragma: no cover - the failure report
-            pytest.fail(f"case {case}: {type(exc).__name__}: {exc}\ninput: {data[:200]!r}")
+        attempt(case, data)
+    # the corpus inputs other than the seed, mutated in turn (their own random stream);
+    # GENERATE companions are left out: the case names no attribute table
+    bases = {p.read_bytes() for p in _corpus_files(name) if p.stat().st_size < 2**18} - {seed}
+    rng = np.random.default_rng(RNG_SEED + 1)
+    for k, base in enumerate(sorted(bases)):
+        for j in range(8):
+            data = mutate(base, rng) if j else base
+            if name == "apy" and rng.random() < 0.6:
+                data = _fix_apy_crc(data)
+            attempt(f"corpus {k}.{j}", data)
     assert outcomes["error"] > N_CASES // 4  # the mutations did reach the checks
