@@ -124,7 +124,13 @@ def session(
 
     from apygis.compile.oriented import OrientedGeometry
     from apygis.compile.session import ReportDecoder, Session, SessionLock, run_tablet_stream
-    from apygis.errors import ApygisError, FileOverwriteError, ProtocolError, RecordError
+    from apygis.errors import (
+        ApygisError,
+        FileOverwriteError,
+        InstrumentError,
+        ProtocolError,
+        RecordError,
+    )
     from apygis.instrument.replay import Replayer, check_recording
     from apygis.instrument.simulator import BUTTONS
     from apygis.instrument.tablet import TabletConfig, make_parser
@@ -165,6 +171,8 @@ def session(
             decoder = ReportDecoder(config, BUTTONS)
     if record and Path(record).exists():
         raise FileOverwriteError(f"{record}: exists; choose another name for --record")
+    if record and not Path(record).resolve().parent.is_dir():
+        raise InstrumentError(f"{record}: cannot record there: no folder {Path(record).parent}")
     source = Path(map_path)
     base = Path(output) / source.name if output else source
     made_dir = not base.parent.exists()

@@ -281,7 +281,7 @@ def _bad_recording(tmp_path):
 @pytest.mark.parametrize(
     "case",
     ["pad", "pad-superscript", "port", "tablet-nocolon", "tablet-protocol", "recording",
-     "motors", "layer", "orientation"],
+     "motors", "layer", "orientation", "record"],
 )  # fmt: skip
 @pytest.mark.parametrize("earlier", [False, True])
 def test_a_failed_start_leaves_everything_as_it_was(tmp_path, case, earlier):
@@ -306,6 +306,8 @@ def test_a_failed_start_leaves_everything_as_it_was(tmp_path, case, earlier):
         "layer": _replay_args(out, "--layer", "road", "--overwrite"),
         "orientation": [src, "--orientation", pad, "--replay", RECORDING, "-o", out,
                         "--overwrite"],
+        "record": [src, "--orientation", ORIENTATION, "--tablet", "calcomp:loop://",
+                   "--record", tmp_path / "no" / "such" / "t.rec", "-o", out, "--overwrite"],
     }[case]  # fmt: skip
     needle = {
         "pad": "p.pad: line 1: unknown button 'JUMP'",
@@ -317,6 +319,7 @@ def test_a_failed_start_leaves_everything_as_it_was(tmp_path, case, earlier):
         "motors": "127.0.0.1:1",
         "layer": "--layer",
         "orientation": "p.pad",
+        "record": "cannot record there",
     }[case]
     _one_line_error(_cli(*args), needle)
     assert _snapshot(out) == before  # no copy, no journal, no lock file, no re-saved layer
