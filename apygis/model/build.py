@@ -336,10 +336,13 @@ def add_lines(
         inner = v + 1 if which == "start" else v - 1
         if dropped[inner]:  # the line shrank to this vertex from the other side
             inner = -1
+        # the line's own other end is not a junction: ends that meet close a line, and
+        # step 1 decided that (a line of three coincident vertices stays open)
+        other = starts[i] + lens[i] - 1 if which == "start" else starts[i]
         cands = [
             t
             for t in tree.query_ball_point(xyz[v, :2], tol)
-            if t != v and t != inner and (t >= n or not dropped[t])
+            if t != v and t != inner and t != other and (t >= n or not dropped[t])
         ]
         can_drop = remaining[i] > 1 and inner >= 0
         if not can_drop:
