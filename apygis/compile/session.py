@@ -50,6 +50,7 @@ from apygis.compile.engine import (
     ZeroPlates,
 )
 from apygis.compile.journal import (
+    MAX_KEYS,
     MAX_MARK_MM,
     Journal,
     JournalWriteError,
@@ -60,6 +61,7 @@ from apygis.compile.journal import (
     read_journal,
 )
 from apygis.errors import ApygisError
+from apygis.instrument.simulator import BUTTONS
 from apygis.model.map import MapFile
 from apygis.model.topology import margin_mask
 
@@ -79,6 +81,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _WORD = {"symbols": "symbol", "line_points": "line point", "texts": "text"}
+_BUTTON_NAMES = frozenset(BUTTONS.values())
 
 
 class ReportDecoder:
@@ -424,7 +427,13 @@ class Session:
             text, note = decode_typed(event.text)
             if note is not None:
                 self.monitor(note)
+            if len(text) > MAX_KEYS:
+                self.monitor(f"typed text of {len(text)} characters (at most {MAX_KEYS}): ignored")
+                return []
             event = Keys(text)
+        elif isinstance(event, Press) and event.button not in _BUTTON_NAMES:
+            self.monitor(f"{event.button!r:.40} is not a button of the pad: ignored")
+            return []
         elif isinstance(event, Mark) and not all(
             -MAX_MARK_MM <= v <= MAX_MARK_MM for v in (event.x_mm, event.y_mm)
         ):

@@ -478,14 +478,20 @@ def test_session_settings_are_checked(tmp_path, geometry):
     assert not list(tmp_path.iterdir()) or not list(tmp_path.glob("S.*"))
 
 
-def test_absurd_marks_are_never_journaled(tmp_path, geometry):
+def test_events_the_journal_would_refuse_are_never_journaled(tmp_path, geometry):
+    """What a session writes, its recovery must read: absurd input is ignored, and told."""
     lines = []
     s = Session(tmp_path / "M", geometry, layer="r", scale=5000, monitor=lines.append)
     assert s.handle(Mark(float("nan"), 1.0)) == []
     assert s.handle(Mark(1e12, 1.0)) == []
+    assert s.handle(Press("JUMP")) == []
+    assert s.handle(Keys("x" * 20_000)) == []
     assert any("off any tablet: ignored" in x for x in lines)
+    assert any("'JUMP' is not a button of the pad: ignored" in x for x in lines)
+    assert any("typed text of 20000 characters" in x for x in lines)
+    s.handle(Press("DESCR"))
     s.close()
-    assert read_journal(s.journal_path).events == []
+    assert read_journal(s.journal_path).events == [Press("DESCR")]
 
 
 # ----------------------------------------------------------------- 9. a full disk
