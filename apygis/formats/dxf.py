@@ -69,7 +69,7 @@ import numpy as np
 from apygis.errors import ApygisError, DriverError, FormatError, ValueRangeError
 from apygis.formats import Driver
 from apygis.formats._io import atomic_write_many, read_bytes
-from apygis.formats._readguard import MAX_COORD, ascii_int, check_str, loads_json
+from apygis.formats._readguard import MAX_COORD, ascii_int, check_str, exact, loads_json
 from apygis.model.build import export_lines
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, crs_string
 from apygis.model.records import (
@@ -239,7 +239,7 @@ class _LayerNames:
         key = name.upper()
         if key in self.map:
             ext = self.map[key]
-        elif _EXT_LIKE.match(name):
+        elif _EXT_LIKE.fullmatch(name):
             ext = name.lower()
         else:
             ext = self.default
@@ -760,10 +760,10 @@ def _header_from_tags(tags, path) -> dict:
         if not isinstance(v, types) or isinstance(v, bool):
             raise FormatError(f"{APPID} header record: bad {key} {v!r}", path=path)
     try:
-        check_map_id(out["id"])
+        exact(check_map_id, out["id"])
         if not all(isinstance(e, str) for e in out["layers"]):
             raise ValueError("layer extensions are strings")
-        out["layers"] = [check_ext(e) for e in out["layers"]]
+        out["layers"] = [exact(check_ext, e) for e in out["layers"]]
     except ValueError as exc:
         raise FormatError(f"{APPID} header record: {exc}", path=path) from None
     ent = out.get("entities")

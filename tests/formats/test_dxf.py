@@ -754,3 +754,18 @@ def test_symbol_codes_and_numbers_take_ascii_digits_only():
     assert dxf._int_or_none(" -12 ") == -12
     assert dxf._int_or_none("1_0") is None
     assert dxf._int_or_none("9" * 5000) is None
+
+
+@pytest.mark.parametrize(("key", "value"), [(b"id", b'"FUZZ\\n"'), (b"layers", b'["r\\n", "e"]')])
+def test_header_names_with_a_line_break_are_refused(key, value, tmp_path):
+    data = _seed(tmp_path)
+    new = b"  1\n" + key + b"\n  3\n" + value + b"\n"
+    (tmp_path / "bad.dxf").write_bytes(data.replace(_header_entry(data, key), new))
+    with pytest.raises(FormatError, match="holds a line break"):
+        apygis.read(tmp_path / "bad.dxf")
+
+
+def test_dxf_layer_name_with_a_line_break_is_not_a_layer_extension():
+    names = dxf._LayerNames(None, "x")
+    assert names("r") == "r"
+    assert names("r\n") == "x"

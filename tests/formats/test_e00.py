@@ -476,3 +476,11 @@ def test_absurd_coordinates_are_refused(tmp_path, small_e00, new, what):
         apygis.read(p)
     assert exc.value.record == _line_of(data, new)
     assert "1e+12 in magnitude" in exc.value.reason
+
+
+def test_map_id_with_a_line_break_is_refused(tmp_path, small_e00):
+    old = next(ln for ln in small_e00.split(b"\n") if ln.startswith(b"ID      "))
+    p = tmp_path / "bad.e00"
+    p.write_bytes(_edit(small_e00, old, _meta_line(b"ID", b"FUZZ\\n")))
+    with pytest.raises(FormatError, match="holds a line break"):
+        apygis.read(p)
