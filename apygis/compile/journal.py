@@ -54,6 +54,7 @@ __all__ = [
     "check_settings",
     "layer_file_states",
     "read_journal",
+    "upgrade_journal",
 ]
 
 log = logging.getLogger(__name__)
@@ -368,6 +369,30 @@ def check_files(contents: JournalContents, base) -> None:
                 f"recovering would overwrite that change. To keep the files, {how}; "
                 "to replay the journal over them anyway use --trust-journal"
             )
+
+
+def upgrade_journal(path, files: dict) -> None:
+    """Rewrite a version 1 journal as version 2, atomically: the same head and events, with
+    ``files`` (the layer files now, which the operator chose to trust) in the head."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+        first, _, rest = data.partition(b"\n")
+        rest = rest[: rest.rfind(b"\n") + 1]  # without a torn last line
+        head = json.loads(first.decode("utf-8"))
+        head["journal"] = VERSION
+        head["files"] = files
+        tmp = path.with_name(path.name + ".new")
+        with open(tmp, "wb") as fh:
+            fh.write(json.dumps(head, ensure_ascii=False).encode("utf-8") + b"\n" + rest)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+        _sync_dir(path.parent)
+    except OSError as exc:
+        raise JournalWriteError(
+            f"{path}: cannot rewrite the journal as version {VERSION}: {exc.strerror or exc}"
+        ) from exc
 
 
 class Journal:

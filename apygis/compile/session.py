@@ -59,6 +59,7 @@ from apygis.compile.journal import (
     layer_file_states,
     planned_file_states,
     read_journal,
+    upgrade_journal,
 )
 from apygis.errors import ApygisError
 from apygis.instrument.simulator import BUTTONS
@@ -373,6 +374,8 @@ class Session:
             for ev in j.events:
                 self._apply(ev, journal=False)
             self._replaying = False
+            if j.version < 2:  # trusted: from now on it knows the files
+                upgrade_journal(self.journal_path, layer_file_states(self.base))
             self.journal = Journal.reopen(self.journal_path)
             self.recovered = len(j.events)
             self.monitor(

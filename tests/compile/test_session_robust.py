@@ -261,7 +261,15 @@ def test_an_old_journal_without_file_states_is_refused_unless_trusted(tmp_path, 
         Session(base, geometry)
     s2 = Session(base, geometry, trust_journal=True)
     assert s2.engine.entries == 1
-    s2.close()
+    _symbols(s2, geometry, 1, x0=2684300.0)
+    entries = s2.engine.entries
+    _crash(s2)
+    j = read_journal(s2.journal_path)  # rewritten as version 2, appended to since
+    assert j.version == 2
+    assert len(j.file_states) == 2  # the files trusted, the recovery's save
+    s3 = Session(base, geometry)  # no option needed any more
+    assert s3.engine.entries == entries > 1
+    s3.close()
 
 
 # ----------------------------------------------------------------- 3. failed starts write nothing
