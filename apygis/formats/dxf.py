@@ -1036,7 +1036,10 @@ def _fast_header(data: bytes, path) -> dict | None:
     lines = data[start:end].decode("utf-8").split("\n")
     if end < 0 or len(lines) % 2:
         return None
-    tags = [(int(lines[i]), lines[i + 1]) for i in range(0, len(lines), 2)]
+    codes = [ascii_int(lines[i].strip()) for i in range(0, len(lines), 2)]  # no '٣' as 3
+    if None in codes:
+        return None
+    tags = [(c, lines[2 * k + 1]) for k, c in enumerate(codes)]
     return _header_from_tags(tags, path)
 
 

@@ -769,3 +769,14 @@ def test_dxf_layer_name_with_a_line_break_is_not_a_layer_extension():
     names = dxf._LayerNames(None, "x")
     assert names("r") == "r"
     assert names("r\n") == "x"
+
+
+def test_fast_header_takes_ascii_group_codes_only(tmp_path):
+    data = _seed(tmp_path)
+    assert dxf._fast_header(data, "seed.dxf")["id"] == "FUZZ"
+    k = data.index(b"  1\nversion\n")
+    odd = data[:k] + "  \u0661\nversion\n".encode() + data[k + len(b"  1\nversion\n") :]
+    assert dxf._fast_header(odd, "odd.dxf") is None  # int() would read '\u0661' as 1
+    (tmp_path / "odd.dxf").write_bytes(odd)
+    with pytest.raises(FormatError):
+        apygis.read(tmp_path / "odd.dxf")
