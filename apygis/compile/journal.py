@@ -345,14 +345,15 @@ def check_files(contents: JournalContents, base) -> None:
     """
     path = contents.path
     how = (
-        f"keep it aside (rename or remove {path}), or run the session again with "
-        "--discard-journal to rename it aside and start from the files as they are"
+        "run the session again with --discard-journal (the journal is renamed aside), or "
+        f"rename or remove {path} yourself"
     )
     if contents.version < 2:
         raise StaleJournalError(
             f"{path}: a version {contents.version} journal, left by an older apygis: it does not "
             "record the layer files it started from, so it cannot tell whether they changed "
-            f"since. To replay it over the files anyway use --trust-journal; otherwise {how}"
+            "since. To replay it over the files anyway, use --trust-journal; to start from the "
+            f"files as they are, {how}"
         )
     now = layer_file_states(base)
     exts = sorted(set(now).union(*contents.file_states))
@@ -366,8 +367,8 @@ def check_files(contents: JournalContents, base) -> None:
             raise StaleJournalError(
                 f"{path}: the layer file {f} {change} after this journal's session started "
                 "(it is neither the file the session started from nor one it saved); "
-                f"recovering would overwrite that change. To keep the files, {how}; "
-                "to replay the journal over them anyway use --trust-journal"
+                f"recovering would overwrite that change. To keep the files as they are, {how}; "
+                "to replay the journal over them anyway, use --trust-journal"
             )
 
 
