@@ -425,6 +425,11 @@ def _read_texts(rd: _Reader, n: int) -> np.ndarray:
         line = rd.next_line()
         if line is None:
             rd.fail(f"the file ends inside the text table (expected {n} rows)")
+        if len(line) < TEXT_COL and _is_header(line):
+            rd.fail(
+                f"found {line.split()[0]!r} where a text row was expected: "
+                f"the table header announced {n} rows"
+            )
         if len(line) < TEXT_COL or line[TEXT_COL - 1] != " ":
             rd.fail(f"a text row has {TEXT_COL - 1} columns of fields, a blank and the text")
         raw = line[: TEXT_COL - 1].encode("latin-1", errors="replace")
