@@ -61,7 +61,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from apygis.compile.geometry import Geometry
-from apygis.errors import ApygisError
+from apygis.errors import ApygisError, OrientationError
 from apygis.model import topology
 from apygis.model.map import MapFile, check_ext
 from apygis.model.records import APY_CAPACITY
@@ -287,6 +287,7 @@ class Engine:
         self.terminated = False
         self.coarse = False
         self.view = "map"
+        self.plates_held = False  # the real-time loop refused the mark: the plates wait
         self._undo: list[tuple] = []
         self._snaps = 0  # snapshots taken: an edit that fails after its snapshot drops it
 
@@ -418,9 +419,22 @@ class Engine:
             self._sample(out)
 
     def _plates(self, out: list) -> None:
+        """Plate positions for the mark; a mark the real-time loop refuses moves nothing.
+
+        A refused mark (behind a projection centre, beyond the motors' range)
+        is told once, and the plates stay where they are until the mark is
+        back where they can follow it.
+        """
         m = self.mark()
         if m is not None:
-            steps = self.geometry.plates(*m)
+            try:
+                steps = self.geometry.plates(*m)
+            except OrientationError as exc:
+                if not self.plates_held:
+                    out.append(Message(f"the plates stay where they are: {exc}"))
+                self.plates_held = True
+                return
+            self.plates_held = False
             if steps is not None:
                 out.append(Plates(tuple(steps)))
 

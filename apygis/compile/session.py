@@ -61,7 +61,7 @@ from apygis.compile.journal import (
     read_journal,
     upgrade_journal,
 )
-from apygis.errors import ApygisError
+from apygis.errors import ApygisError, OrientationError
 from apygis.instrument.simulator import BUTTONS
 from apygis.model.map import MapFile
 from apygis.model.topology import margin_mask
@@ -358,6 +358,7 @@ class Session:
         self._closed = False
         self._failed: Exception | None = None
         self._last_status = None
+        self._last_steps: tuple[int, int, int, int] = (0, 0, 0, 0)
         self._replaying = False
         if self.journal_path.exists() and discard_journal:
             aside = _aside(self.journal_path)
@@ -475,6 +476,7 @@ class Session:
         if self._replaying or self.finished:  # recovery, or after the end: act on nothing
             return
         if isinstance(e, Plates):
+            self._last_steps = e.steps
             if self.motors is not None:
                 x, y, z, a = e.steps
                 self.motors.move_to(x, y, z, a, wait=False)
@@ -504,9 +506,13 @@ class Session:
             self.finish()
 
     def _current_steps(self):
+        """The plate positions of the mark, or the last ones sent where the loop refuses it."""
         m = self.engine.mark()
-        steps = None if m is None else self.geometry.plates(*m)
-        return steps or (0, 0, 0, 0)
+        try:
+            steps = None if m is None else self.geometry.plates(*m)
+        except OrientationError:
+            steps = None
+        return steps or self._last_steps
 
     # ------------------------------------------------------------------ files
 

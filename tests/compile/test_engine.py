@@ -427,3 +427,23 @@ def test_step_shutter_and_status_counts():
     assert Message("floating mark seen in the model") in out
     status = out[-1]
     assert status.counts == {"symbols": 0, "line_points": 0, "texts": 0}
+
+
+def test_a_mark_the_real_time_loop_refuses_moves_no_plate():
+    """A mark behind a projection centre is told once; the plates wait, then follow again."""
+    from apygis.compile.oriented import OrientedGeometry
+    from apygis.orient.io import load_orientation
+    from tests.conftest import SAMPLES
+
+    orientation = load_orientation(SAMPLES / "session" / "ZH1091.orientation.json")
+    eng = Engine(apygis.read(SAMPLES / "ZH1091"), "r", OrientedGeometry(orientation))
+    assert any(isinstance(e, Plates) for e in eng.handle(Mark(100.0, 100.0)))
+    far = eng.handle(Mark(1e7, 1e7))
+    assert not any(isinstance(e, Plates) for e in far)
+    (msg,) = [e for e in far if isinstance(e, Message)]
+    assert msg.text.startswith("the plates stay where they are: ")
+    assert "not in front of photo" in msg.text
+    again = eng.handle(Mark(2e7, 1e7))  # still refused: no plates, told only once
+    assert not any(isinstance(e, (Plates, Message)) for e in again)
+    back = eng.handle(Mark(100.0, 101.0))
+    assert any(isinstance(e, Plates) for e in back)
