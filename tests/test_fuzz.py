@@ -24,6 +24,7 @@ import hashlib
 import importlib
 import os
 import pkgutil
+import re
 import shutil
 import signal
 import struct
@@ -126,6 +127,42 @@ def mutate(data: bytes, rng: np.random.Generator) -> bytes:
 
 def _readers() -> set[str]:
     return {name for name, d in drivers().items() if "r" in d.modes}
+
+
+# values that broke readers once (issue 9): overflowing, non-finite, huge, non-ASCII
+# digits, lone surrogates as JSON escapes and as raw bytes, deep nesting
+HOSTILE = (
+    b"1e308",
+    b"-1e308",
+    b"1e999",
+    b"NaN",
+    b"-Infinity",
+    b"inf",
+    b"9" * 5000,
+    b"1000000000000",
+    "\u00b2".encode(),
+    "\u0663".encode(),
+    b"1_0",
+    b"\\udcfc",
+    b"\xed\xb3\xbc",
+    b"\xff",
+    b"[" * 2000,
+    b"{" * 2000,
+    b"\r",
+    b"\n",
+)
+_NUMBER = re.compile(rb"-?[0-9][0-9.eE+-]*")
+
+
+def mutate_hostile(data: bytes, rng: np.random.Generator) -> bytes:
+    """A number of ``data`` (or any spot) replaced by one of :data:`HOSTILE`."""
+    token = HOSTILE[rng.integers(0, len(HOSTILE))]
+    numbers = [m.span() for m in _NUMBER.finditer(data[:200_000])]
+    if numbers and rng.random() < 0.8:
+        a, b = numbers[rng.integers(0, len(numbers))]
+    else:
+        a = b = int(rng.integers(0, len(data) + 1))
+    return data[:a] + token + data[b:]
 
 
 def test_every_reader_has_a_seed():
@@ -268,6 +305,7 @@ def test_reader_survives_fuzzing(name, tmp_path):
         attempt(case, data)
     # the corpus inputs other than the seed, mutated in turn (their own random stream);
     # GENERATE companions are left out: the case names no attribute table
+    # and, for drivers with hostile corpus files, hostile values put into the seed
     bases = {p.read_bytes() for p in _corpus_files(name) if p.stat().st_size < 2**18} - {seed}
     rng = np.random.default_rng(RNG_SEED + 1)
     for k, base in enumerate(sorted(bases)):
@@ -276,4 +314,11 @@ def test_reader_survives_fuzzing(name, tmp_path):
             if name == "apy" and rng.random() < 0.6:
                 data = _fix_apy_crc(data)
             attempt(f"corpus {k}.{j}", data)
+    for case in range(N_CASES // 4 if bases else 0):
+        data = mutate_hostile(seed, rng)
+        if rng.random() < 0.3:
+            data = mutate_hostile(data, rng)
+        if name == "apy":
+            data = _fix_apy_crc(data)
+        attempt(f"hostile {case}", data)
     assert outcomes["error"] > N_CASES // 4  # the mutations did reach the checks
