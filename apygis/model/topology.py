@@ -9,6 +9,13 @@ side (branch) references. The rules this module reads them by:
 * A **branch** hangs off a junction J of another chain: its first point's
   backward reference (or its last point's forward reference) is J, and J holds
   the reciprocal in ``side1`` or ``side2``. A point has room for two branches.
+  The junction may lie on the branch's own line (a loop hanging on one of its
+  points), and a branch end may itself be a junction. A point holds one
+  backward and one forward reference, so a line whose first point hangs on a
+  junction by its backward reference cannot also be closed there.
+* Two points reference each other by one link at most: a mutual link, or a
+  branch end and its junction. The editing methods of
+  :class:`~apygis.model.map.Layer` keep it so.
 * **Margin points** lack a forward or a backward reference: the ends of lines
   that are open (APY's margin file, used to join lines across sheet edges).
   A branch's end at its junction is not a margin point.
