@@ -40,6 +40,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from apygis.errors import FileOverwriteError, FormatError, WriteError
+from apygis.formats._readguard import loads_json
 
 __all__ = [
     "STAMP_SUFFIX",
@@ -446,8 +447,8 @@ def _write_stamp(real: Path, files: dict, before: dict, named: Path) -> None:
 
 def _read_stamp(path: Path) -> dict:
     try:
-        doc = json.loads(read_bytes(path))
-    except (ValueError, UnicodeDecodeError):
+        doc = loads_json(read_bytes(path), "set stamp", path)
+    except FormatError:
         doc = None
     if (
         not isinstance(doc, dict)

@@ -383,3 +383,13 @@ def test_writing_one_layer_does_not_hide_an_interrupted_write(sample_map, tmp_pa
         apygis.read(tmp_path / "M")
     apygis.write(new, tmp_path / "M")
     assert _sig(apygis.read(tmp_path / "M")) == _sig(new)
+
+
+@pytest.mark.parametrize(
+    "stamp", [b"[" * 100_000 + b"]" * 100_000, b'{"format": NaN}', b"\xff\xfe", b"[]"]
+)
+def test_a_hostile_stamp_is_one_clear_error(sample_map, tmp_path, stamp):
+    apygis.write(sample_map, tmp_path / "ZH1091")
+    (tmp_path / ".ZH1091.apyset").write_bytes(stamp)
+    with pytest.raises(FormatError, match=r"\.ZH1091\.apyset: not an apygis set stamp"):
+        apygis.read(tmp_path / "ZH1091")
