@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import re
+import reprlib
 from collections.abc import Iterable, Sequence
 
 import numpy as np
@@ -95,6 +96,33 @@ def _check_xyz(x, y, z) -> tuple[float, float, float]:
     if not all(math.isfinite(c) for c in v):
         raise RecordError(f"coordinates must be finite, not {v!r}")
     return v
+
+
+def _check_point(xyz) -> tuple[float, float, float]:
+    """One position ``(x, y, z)``: three finite numbers."""
+    try:
+        x, y, z = xyz
+    except (TypeError, ValueError):
+        raise RecordError(f"a position is (x, y, z), not {reprlib.repr(xyz)}") from None
+    return _check_xyz(x, y, z)
+
+
+def _check_points(points, min_count: int) -> np.ndarray:
+    """Positions ``[(x, y, z), ...]`` as an ``(n, 3)`` float array, ``n >= min_count``."""
+    try:
+        pts = np.asarray(list(points), dtype=float)
+    except (TypeError, ValueError):
+        raise RecordError(
+            f"line points are (x, y, z) numbers each, not {reprlib.repr(points)}"
+        ) from None
+    if len(pts) == 0 and min_count == 0:
+        return pts.reshape(0, 3)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < max(min_count, 1):
+        what = "one or more points" if min_count else "points"
+        raise RecordError(f"a line needs {what} of (x, y, z), not {reprlib.repr(points)}")
+    if not np.isfinite(pts).all():
+        raise RecordError("line coordinates must be finite")
+    return pts
 
 
 def check_encodable(value: str, what: str) -> str:
@@ -243,11 +271,7 @@ class Layer:
         single point starts a line that :meth:`extend_line` continues.
         """
         code = _check_code(code)
-        pts = np.asarray(list(points), dtype=float)
-        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
-            raise RecordError("a line needs one or more points of (x, y, z)")
-        if not np.isfinite(pts).all():
-            raise RecordError("line coordinates must be finite")
+        pts = _check_points(points, 1)
         if closed and len(pts) < 3:
             raise TopologyError(f"a closed line needs at least three points, not {len(pts)}")
         t = self._tables["line_points"]
@@ -270,17 +294,15 @@ class Layer:
         """
         lp = self._tables["line_points"].rows()
         i = self._line_row(end)
-        pts = np.asarray(list(points), dtype=float).reshape(-1, 3)
-        if not np.isfinite(pts).all():
-            raise RecordError("line coordinates must be finite")
-        if len(pts) == 0:
-            return []
+        pts = _check_points(points, 0)
         if lp["fwd"][i] == NO_REF:
             ahead, behind = "fwd", "back"
         elif lp["back"][i] == NO_REF:
             ahead, behind = "back", "fwd"
         else:
-            raise TopologyError(f"line point {end} is not the end of a line")
+            raise TopologyError(f"layer {self.ext}: line point {end} is not the end of a line")
+        if len(pts) == 0:
+            return []
         code = int(lp["code"][i])
         nums = _allocate(lp["num"], len(pts))
         rows = np.zeros(len(pts), dtype=LINE_DTYPE)
@@ -307,7 +329,7 @@ class Layer:
 
         The new point takes the line code of ``a``; returns its number.
         """
-        x, y, z = _check_xyz(*xyz)
+        x, y, z = _check_point(xyz)
         t = self._tables["line_points"]
         lp = t.rows()
         i, j = self._line_row(a), self._line_row(b)

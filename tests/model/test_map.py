@@ -343,3 +343,35 @@ def test_a_map_with_latin1_notes_and_texts_survives_the_apy_format(tmp_path):
     m.layer("h").add_text(0.5, 1.25, 400.0, "Zürich")
     apygis.write(m, tmp_path / "T", driver="apy")
     assert apygis.read(tmp_path / "T", driver="apy") == m
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        # three (x, y) pairs were read as two (x, y, z) points
+        (lambda lay, n: lay.extend_line(n[-1], [(1, 2), (3, 4), (5, 6)]), "points of"),
+        (lambda lay, n: lay.extend_line(n[-1], [(1, 2)]), "points of"),
+        (lambda lay, n: lay.extend_line(n[-1], [("a", 0, 0)]), "numbers"),
+        (lambda lay, n: lay.extend_line(n[-1], None), "numbers"),
+        (lambda lay, n: lay.extend_line(n[-1], [(0, 0, math.nan)]), "finite"),
+        (lambda lay, n: lay.add_line([("a", 0, 0)], 3), "numbers"),
+        (lambda lay, n: lay.add_line([(0, 0, 0), (1, 1)], 3), "numbers"),
+        (lambda lay, n: lay.split(n[0], n[1], (0, 0)), "position"),
+        (lambda lay, n: lay.split(n[0], n[1], None), "position"),
+    ],
+)
+def test_bad_line_coordinates_raise_record_error(call, match):
+    lay = apygis.MapFile("T").layer("r")
+    n = lay.add_line([(0, 0, 0), (1, 0, 0)], code=1)
+    before = lay.copy()
+    with pytest.raises(RecordError, match=match):
+        call(lay, n)
+    assert lay == before
+
+
+def test_extend_line_with_no_points_still_needs_a_line_end():
+    lay = apygis.MapFile("T").layer("r")
+    n = lay.add_line([(0, 0, 0), (1, 0, 0), (2, 0, 0)], code=1)
+    assert lay.extend_line(n[-1], []) == []
+    with pytest.raises(TopologyError, match="not the end"):
+        lay.extend_line(n[1], [])
