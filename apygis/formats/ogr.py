@@ -66,6 +66,7 @@ from apygis.formats._io import (
     stamp_path,
     write_failed,
 )
+from apygis.formats._readguard import MAX_COORD, bad_coord_rows
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
 from apygis.model.records import (
     LINE_DTYPE,
@@ -281,16 +282,38 @@ def _from_wkb(wkb: np.ndarray, path, layer: str) -> np.ndarray:
 
     try:
         with _quiet():
-            return shapely.from_wkb(wkb, on_invalid="raise")
+            geoms = shapely.from_wkb(wkb, on_invalid="raise")
     except Exception as exc:  # shapely.errors.GEOSException, TypeError
         raise FormatError(f"unreadable geometry: {exc}", path, _rec(layer)) from None
+    # every coordinate of every geometry, before any of it reaches the model or scipy
+    # (a 2-D geometry's z comes back as NaN: only a 3-D one's z must be a number)
+    xyz, which = shapely.get_coordinates(geoms, include_z=True, return_index=True)
+    z = xyz[:, 2]
+    bad = np.zeros(len(xyz), bool)
+    bad[bad_coord_rows(xyz[:, :2])] = True
+    with np.errstate(invalid="ignore"):
+        bad |= np.abs(z) > MAX_COORD
+    bad |= np.isnan(z) & shapely.has_z(geoms)[which]
+    rows = np.flatnonzero(bad)
+    if len(rows):
+        k = int(which[rows[0]])
+        raise FormatError(
+            f"feature {k + 1}: coordinates are not finite or exceed {MAX_COORD:g} in magnitude",
+            path,
+            _rec(layer),
+        )
+    return geoms
 
 
 def _check_finite(xyz: np.ndarray, path, layer: str) -> None:
-    bad = ~np.isfinite(xyz).all(axis=1)
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        raise FormatError(f"feature {k + 1}: coordinates are not finite", path, _rec(layer))
+    rows = bad_coord_rows(xyz)
+    if len(rows):
+        k = int(rows[0])
+        raise FormatError(
+            f"feature {k + 1}: coordinates are not finite or exceed {MAX_COORD:g} in magnitude",
+            path,
+            _rec(layer),
+        )
 
 
 # --------------------------------------------------------------------------- writing
@@ -831,9 +854,42 @@ def _sources(path, fmt: _Format) -> tuple[list[_Source], str]:
 # --------------------------------------------------------------------------- reading: columns
 
 
+def _check_declared_count(src: _Source) -> None:
+    """Refuse a FlatGeobuf whose header claims more features than its bytes can hold.
+
+    FlatGeobuf is the one format here whose header states the feature count,
+    and GDAL sizes its buffers from it: a damaged header claiming two billion
+    features in a 2 KB file made GDAL allocate 23 GB. Every feature takes at
+    least its 4-byte length prefix, so a count above ``size / 4`` is a lie.
+    (GeoPackage counts rows, Shapefile derives its count from the file length,
+    GeoJSON parses: none of them trusts a header.)
+    """
+    import pyogrio
+
+    if not src.dataset.lower().endswith(".fgb"):
+        return
+    info = _gdal(
+        lambda: pyogrio.read_info(src.dataset, layer=src.layer, force_feature_count=False),
+        "cannot read",
+        src.dataset,
+        src.name,
+    )
+    count = info.get("features") if isinstance(info, dict) else None
+    size = os.path.getsize(src.dataset)
+    if isinstance(count, int) and count > size // 4:
+        raise FormatError(
+            f"the header claims {count} features, but the file has only {size} bytes: "
+            "the file is damaged",
+            src.dataset,
+            _rec(src.name),
+        )
+
+
 def _read_layer(src: _Source):
     """``(meta, wkb or None, {field: array})`` of one OGR layer."""
     import pyogrio.raw
+
+    _check_declared_count(src)
 
     def call():
         return pyogrio.raw.read(src.dataset, layer=src.layer)

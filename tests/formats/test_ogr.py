@@ -155,7 +155,7 @@ def test_every_float64_comes_back_bit_for_bit(tmp_path, name):
     lay = m.layer("r")
     for k in range(20):
         lay.add_symbol(*rng.uniform(-180, 180, 2), rng.normal() * 1e-7, k)
-    lay.add_symbol(1e-300, -1e300, 5e-324, 1)
+    lay.add_symbol(1e-300, -987654321098.7654, 5e-324, 1)  # readers refuse |x| > 1e12
     lay.add_line(rng.uniform(0, 1, (10, 3)), code=5)
     lay.add_text(1 / 3, 2 / 3, 123456.789012345678, "  blanks around ")
     target = _target(tmp_path, name)
@@ -519,3 +519,22 @@ def test_errors_are_apygis_errors_for_truncated_files(sample_map, tmp_path):
         with pytest.raises(ApygisError):
             apygis.read(p, driver="gpkg")
     assert os.path.exists(tmp_path / "t.gpkg")
+
+
+def test_a_flatgeobuf_claiming_more_features_than_bytes_is_refused():
+    """Its header said two billion features in 2 KB: GDAL allocated 23 GB for it."""
+    from tests.conftest import ROOT
+
+    path = ROOT / "tests" / "fuzz_corpus" / "fgb" / "hostile-count-2e9-features.fgb"
+    with pytest.raises(FormatError, match="claims 1946157058 features, but the file has only"):
+        apygis.read(path)
+
+
+def test_foreign_coordinates_beyond_any_ground_are_refused(tmp_path):
+    path = tmp_path / "far.geojson"
+    path.write_text(
+        '{"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}, '
+        '"geometry": {"type": "LineString", "coordinates": [[0, 0], [1e300, 5]]}}]}'
+    )
+    with pytest.raises(FormatError, match="feature 1: coordinates are not finite or exceed"):
+        apygis.read(path)
