@@ -20,6 +20,7 @@ Bugs this machine found are pinned as plain regression tests in
 
 from __future__ import annotations
 
+import math
 import tempfile
 from pathlib import Path
 
@@ -215,6 +216,54 @@ class LayerMachine(RuleBasedStateMachine):
         pts = self.lay.closure(new).points
         assert a in pts
         assert b in pts
+
+    @rule(
+        data=st.data(),
+        points=st.one_of(
+            st.none(),
+            st.just("abc"),
+            st.lists(st.tuples(cm, cm), min_size=1, max_size=3),
+            st.lists(st.tuples(cm, cm, st.sampled_from([math.nan, math.inf])), min_size=1),
+            st.lists(st.tuples(cm, st.sampled_from(["a", None]), cm), min_size=1, max_size=2),
+        ),
+        bad=st.sampled_from([math.nan, -math.inf, None, "a", (1.0,)]),
+        code=st.one_of(
+            st.integers(100, 1000), st.integers(-5, -1), st.floats(0, 99), st.booleans()
+        ),
+        text=st.one_of(
+            st.text(min_size=25, max_size=30),
+            st.sampled_from(["a\nb", "\x00", "Z\udcfcrich", "\x85"]),
+            st.none(),
+        ),
+    )
+    def refused_arguments(self, data, points, bad, code, text):
+        """Malformed positions, codes and texts: each edit refuses with an ApygisError."""
+        edits = [
+            (self.lay.add_line, points, 1),
+            (self.lay.add_line, [(0.0, 0.0, 0.0)], code),
+            (self.lay.extend_line, self.pick_point(data), points),
+            (self.lay.split, self.pick_point(data), self.pick_point(data), (0.0, bad, 0.0)),
+            (self.lay.split, self.pick_point(data), self.pick_point(data), points),
+            (self.lay.add_symbol, bad, 0.0, 0.0, 1),
+            (self.lay.add_symbol, 0.0, 0.0, 0.0, code),
+            (self.lay.add_text, 0.0, 0.0, bad, "T"),
+            (self.lay.add_text, 0.0, 0.0, 0.0, text),
+        ]
+        for edit, *args in edits:
+            assert self.attempt(edit, *args) is None, (edit.__name__, args)
+
+    @rule(data=st.data())
+    def area(self, data):
+        """AREA from any point to any point: a ring's area, or refused."""
+        a, b = self.pick_point(data), self.pick_point(data)
+        try:
+            res = self.lay.area(a, b)
+        except ApygisError:
+            return
+        clo = self.lay.closure(a)
+        assert clo.closed
+        assert sorted(res.points) == sorted(clo.points)
+        assert res.area_m2 >= 0
 
     # ------------------------------------------------------------------ delete
 
