@@ -511,7 +511,7 @@ class Layer:
         issues += topology.validate_numbers("texts", self.texts["num"])
         issues += topology.validate_line_points(self.line_points)
         tx = self.texts
-        codes = np.ascontiguousarray(tx["text"]).view("<u4").reshape(len(tx), TEXT_LEN)
+        codes = np.ascontiguousarray(tx["text"]).view(np.uint32).reshape(len(tx), TEXT_LEN)
         bad = ((codes >= 0xD800) & (codes <= 0xDFFF)).any(axis=1)
         issues += [
             topology.Issue(
