@@ -52,9 +52,9 @@ def plot(path, output, plotter, layers, library, driver, overwrite):
     import apygis
     from apygis.errors import DriverError, FileOverwriteError
     from apygis.formats._io import atomic_write_many
-    from apygis.formats.plotdef import PlotterDef, read_plotdef
-    from apygis.formats.plotmodel import build_drawing
     from apygis.model.symbols import load_library
+    from apygis.plot.drawing import build_drawing
+    from apygis.plot.plotdef import PlotterDef, read_plotdef
 
     out = Path(output)
     fmt = FORMATS.get(out.suffix.lower())
@@ -77,10 +77,10 @@ def plot(path, output, plotter, layers, library, driver, overwrite):
             )
     d = build_drawing(m, pdef, load_library(library), layers)
     if fmt == "hpgl":
-        from apygis.formats.hpgl import drawing_hpgl as render
+        from apygis.plot.hpgl import drawing_hpgl as render
     elif fmt == "svg":
-        from apygis.formats.svg import drawing_svg as render
+        from apygis.plot.svg import drawing_svg as render
     else:
-        from apygis.formats.pdf import drawing_pdf as render
+        from apygis.plot.pdf import drawing_pdf as render
     atomic_write_many({out: render(d)})
     click.echo(f"wrote {output} ({fmt.upper()}): {d.summary()}")

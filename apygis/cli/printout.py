@@ -30,8 +30,8 @@ def printout(path, output, driver, library, overwrite):
     import apygis
     from apygis.errors import FileOverwriteError
     from apygis.formats._io import atomic_write_many
-    from apygis.formats.printout import printout_text
     from apygis.model.symbols import load_library
+    from apygis.plot.printout import printout_text
 
     m = apygis.read(path, driver=driver)
     text = printout_text(m, load_library(library))
@@ -41,7 +41,7 @@ def printout(path, output, driver, library, overwrite):
     if Path(output).exists() and not overwrite:
         raise FileOverwriteError(f"{output} exists; use --overwrite to replace it")
     if Path(output).suffix.lower() == ".pdf":
-        from apygis.formats.pdf import text_pages, text_pages_pdf
+        from apygis.plot.pdf import text_pages, text_pages_pdf
 
         data = text_pages_pdf(text, title=f"APY print-out {m.id}")
         atomic_write_many({Path(output): data})

@@ -1,8 +1,8 @@
 """The plot of a map on paper: a list of drawing primitives in paper millimetres.
 
-:func:`build_drawing` lays out a map once, by a :class:`~apygis.formats.plotdef.PlotterDef`;
-the HP-GL, SVG and PDF back-ends (:mod:`~apygis.formats.hpgl`,
-:mod:`~apygis.formats.svg`, :mod:`~apygis.formats.pdf`) only render the
+:func:`build_drawing` lays out a map once, by a :class:`~apygis.plot.plotdef.PlotterDef`;
+the HP-GL, SVG and PDF back-ends (:mod:`~apygis.plot.hpgl`,
+:mod:`~apygis.plot.svg`, :mod:`~apygis.plot.pdf`) only render the
 primitives. Paper coordinates are millimetres from the paper's lower-left
 corner, x to the right (ground X, east) and y up (ground Y, north)::
 
@@ -41,8 +41,8 @@ from typing import NamedTuple
 import numpy as np
 
 from apygis.errors import FormatError, RecordError
-from apygis.formats.plotdef import ISO_A_SIZES, TITLE_BLOCK_MM, PenDef, PlotterDef
 from apygis.model.map import MapFile, crs_string
+from apygis.plot.plotdef import ISO_A_SIZES, TITLE_BLOCK_MM, PenDef, PlotterDef
 
 __all__ = [
     "CAP_HEIGHT",

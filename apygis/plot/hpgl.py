@@ -1,4 +1,4 @@
-"""HP-GL/2-compatible plotter output of a :class:`~apygis.formats.plotmodel.Drawing`.
+"""HP-GL/2-compatible plotter output of a :class:`~apygis.plot.drawing.Drawing`.
 
 APY drove "drafting plotters", flat bed or drum, through its PLOTTER.DEF;
 HP-GL is the language those plotters share. The output uses a small,
@@ -18,7 +18,7 @@ with (0, 0) at the paper's lower-left corner::
 Each instruction group ends with a newline (plotters ignore it). Items are
 drawn pen by pen (pen 1 first) to save pen changes, each pen's items in
 drawing order. A closed line returns to its first point. A symbol's painted
-cells (:class:`~apygis.formats.plotmodel.FilledRects`) are hatched with
+cells (:class:`~apygis.plot.drawing.FilledRects`) are hatched with
 strokes along each rectangle's longer side, as many as the pen needs to
 cover its shorter side (one stroke for a one-cell-wide run when the pen is
 at least a cell wide), the strokes inset by half the pen width so that the
@@ -28,8 +28,8 @@ are dropped and what is left outside ASCII becomes ``?``.
 
 Examples
 --------
->>> from apygis.formats.plotmodel import Drawing, PaperLine
->>> from apygis.formats.plotdef import PenDef
+>>> from apygis.plot.drawing import Drawing, PaperLine
+>>> from apygis.plot.plotdef import PenDef
 >>> d = Drawing(210, 297, "A4 portrait", 5000, (0.0, 0.0), (15, 15, 195, 282),
 ...             {1: PenDef(1, (0, 0, 0), 0.35)})
 >>> d.items.append(PaperLine(1, np.array([(15.0, 15.0), (20.0, 15.0)]), False))
@@ -49,7 +49,7 @@ import unicodedata
 
 import numpy as np
 
-from apygis.formats.plotmodel import Drawing, FilledRects, PaperLine, PaperText
+from apygis.plot.drawing import Drawing, FilledRects, PaperLine, PaperText
 
 __all__ = ["CHAR_WIDTH", "ETX", "UNITS_PER_MM", "ascii_label", "drawing_hpgl", "hatch_strokes"]
 

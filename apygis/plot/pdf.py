@@ -11,10 +11,10 @@ Plot (:func:`drawing_pdf`): one page the size of the paper. The content
 stream first scales user space to millimetres
 (``2.834646 0 0 2.834646 0 0 cm``, 72 / 25.4 points per mm) and sets round
 caps and joins, so paper coordinates are written as they are, y up. A
-:class:`~apygis.formats.plotmodel.PaperLine` is one path ``m l ... S``
-(``h S`` when closed), a symbol's :class:`~apygis.formats.plotmodel.FilledRects`
+:class:`~apygis.plot.drawing.PaperLine` is one path ``m l ... S``
+(``h S`` when closed), a symbol's :class:`~apygis.plot.drawing.FilledRects`
 one ``re`` per rectangle and one ``f``, a
-:class:`~apygis.formats.plotmodel.PaperText` ``BT /F1 size Tf x y Td (...) Tj ET``
+:class:`~apygis.plot.drawing.PaperText` ``BT /F1 size Tf x y Td (...) Tj ET``
 in Helvetica with size = cap height / 0.718. Pen colour and width are set
 (``RG``, ``rg``, ``w``) only where they change.
 
@@ -41,7 +41,7 @@ from __future__ import annotations
 import zlib
 from collections.abc import Sequence
 
-from apygis.formats.plotmodel import CAP_HEIGHT, Drawing, FilledRects, PaperLine, PaperText
+from apygis.plot.drawing import CAP_HEIGHT, Drawing, FilledRects, PaperLine, PaperText
 
 __all__ = [
     "A4_PT",

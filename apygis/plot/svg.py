@@ -1,4 +1,4 @@
-"""SVG output of a :class:`~apygis.formats.plotmodel.Drawing`.
+"""SVG output of a :class:`~apygis.plot.drawing.Drawing`.
 
 One SVG document the size of the paper: ``width`` and ``height`` in mm
 and a ``viewBox`` in mm, so one user unit is one paper millimetre. SVG's y
@@ -6,20 +6,20 @@ axis points down; paper y (north) points up, so every y is written as
 ``height - y``. Elements, each carrying its pen as ``class="pen-N"`` and its
 role as ``data-role``:
 
-* :class:`~apygis.formats.plotmodel.PaperLine` -> ``<polyline>`` (a closed
+* :class:`~apygis.plot.drawing.PaperLine` -> ``<polyline>`` (a closed
   line repeats its first point at the end), stroked in the pen's colour and
   width with round caps and joins, no fill;
-* :class:`~apygis.formats.plotmodel.FilledRects` -> a ``<g>`` of ``<rect>``,
+* :class:`~apygis.plot.drawing.FilledRects` -> a ``<g>`` of ``<rect>``,
   filled in the pen's colour;
-* :class:`~apygis.formats.plotmodel.PaperText` -> ``<text>`` at the start of
+* :class:`~apygis.plot.drawing.PaperText` -> ``<text>`` at the start of
   its baseline, Helvetica (or Arial, or sans-serif), font size = cap height
   / 0.718, blanks kept (``xml:space="preserve"``).
 
 Examples
 --------
 >>> import xml.etree.ElementTree as ET
->>> from apygis.formats.plotmodel import Drawing, PaperText
->>> from apygis.formats.plotdef import PenDef
+>>> from apygis.plot.drawing import Drawing, PaperText
+>>> from apygis.plot.plotdef import PenDef
 >>> d = Drawing(210, 297, "A4 portrait", 5000, (0.0, 0.0), (15, 15, 195, 282),
 ...             {1: PenDef(1, (0, 0, 0), 0.35)})
 >>> d.items.append(PaperText(1, 20.0, 20.0, 2.5, "A & B"))
@@ -37,7 +37,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
-from apygis.formats.plotmodel import CAP_HEIGHT, Drawing, FilledRects, PaperLine, PaperText
+from apygis.plot.drawing import CAP_HEIGHT, Drawing, FilledRects, PaperLine, PaperText
 
 __all__ = ["SVG_NS", "drawing_svg"]
 

@@ -12,7 +12,7 @@ from click.testing import CliRunner
 from apygis.cli import main
 from apygis.model.symbols import ENV_VAR
 from tests.conftest import SAMPLES
-from tests.formats.test_plot import parse_hpgl, pdf_objects, pdf_pages
+from tests.plot.test_plot import parse_hpgl, pdf_objects, pdf_pages
 
 
 @pytest.fixture

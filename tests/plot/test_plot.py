@@ -16,23 +16,9 @@ import pytest
 
 import apygis
 from apygis.errors import FormatError, RecordError
-from apygis.formats.hpgl import ascii_label, drawing_hpgl, hatch_strokes
-from apygis.formats.pdf import (
-    A4_PT,
-    drawing_pdf,
-    pdf_string,
-    text_page_capacity,
-    text_pages,
-    text_pages_pdf,
-)
-from apygis.formats.plotdef import (
-    PaperSpec,
-    PenRule,
-    PlotterDef,
-    parse_plotdef,
-    read_plotdef,
-)
-from apygis.formats.plotmodel import (
+from apygis.model.build import export_lines
+from apygis.model.symbols import default_library
+from apygis.plot.drawing import (
     FilledRects,
     PaperLine,
     PaperText,
@@ -40,10 +26,24 @@ from apygis.formats.plotmodel import (
     clip_polyline,
     symbol_runs,
 )
-from apygis.formats.printout import printout_text
-from apygis.formats.svg import SVG_NS, drawing_svg
-from apygis.model.build import export_lines
-from apygis.model.symbols import default_library
+from apygis.plot.hpgl import ascii_label, drawing_hpgl, hatch_strokes
+from apygis.plot.pdf import (
+    A4_PT,
+    drawing_pdf,
+    pdf_string,
+    text_page_capacity,
+    text_pages,
+    text_pages_pdf,
+)
+from apygis.plot.plotdef import (
+    PaperSpec,
+    PenRule,
+    PlotterDef,
+    parse_plotdef,
+    read_plotdef,
+)
+from apygis.plot.printout import printout_text
+from apygis.plot.svg import SVG_NS, drawing_svg
 from tests.conftest import SAMPLES
 
 PLOTTER_DEF = SAMPLES / "PLOTTER.DEF"
