@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from apygis.cli._common import run_guarded
+from apygis.cli._common import progress_bar, run_guarded
 
 __all__ = ["FORMATS", "plot"]
 
@@ -55,6 +55,7 @@ def plot(path, output, plotter, layers, library, driver, overwrite):
     from apygis.model.symbols import load_library
     from apygis.plot.drawing import build_drawing
     from apygis.plot.plotdef import PlotterDef, read_plotdef
+    from apygis.progress import STEPS, fraction
 
     out = Path(output)
     fmt = FORMATS.get(out.suffix.lower())
@@ -75,7 +76,13 @@ def plot(path, output, plotter, layers, library, driver, overwrite):
                 f"(its layers: {' '.join(sorted(m.layers)) or 'none'})",
                 param_hint="--layers",
             )
-    d = build_drawing(m, pdef, load_library(library), layers)
+    lib = load_library(library)
+    with progress_bar(STEPS, f"plotting {m.id}") as bar:
+
+        def advance(done: int, total: int) -> None:
+            bar.update(round(STEPS * fraction(done, total)) - bar.pos)
+
+        d = build_drawing(m, pdef, lib, layers, progress=advance)
     if fmt == "hpgl":
         from apygis.plot.hpgl import drawing_hpgl as render
     elif fmt == "svg":

@@ -43,6 +43,7 @@ import numpy as np
 from apygis.errors import FormatError, RecordError
 from apygis.model.map import MapFile, crs_string
 from apygis.plot.plotdef import ISO_A_SIZES, TITLE_BLOCK_MM, PenDef, PlotterDef
+from apygis.progress import Progress
 
 __all__ = [
     "CAP_HEIGHT",
@@ -385,6 +386,7 @@ def build_drawing(
     plotdef: PlotterDef | None = None,
     library=None,
     layers: Sequence[str] | None = None,
+    progress: Progress | None = None,
 ) -> Drawing:
     """Lay out map ``m`` on paper.
 
@@ -398,6 +400,8 @@ def build_drawing(
         Symbol bitmaps; default :func:`apygis.model.symbols.load_library`.
     layers : sequence of str, optional
         Layer extensions to plot (default: all, in alphabetical order).
+    progress : Progress, optional
+        ``progress(done, total)`` after each layer (:mod:`apygis.progress`).
 
     Returns
     -------
@@ -500,7 +504,9 @@ def build_drawing(
     cell = size / 15.0
     th = pdef.text_height_mm
     warned: set[int] = set()
-    for e in exts:
+    for k, e in enumerate(exts):
+        if progress is not None and k:
+            progress(k, len(exts))
         lay = m.layers[e]
         # -- lines
         ls = export_lines(lay)
@@ -583,6 +589,8 @@ def build_drawing(
     if pdef.title:
         _title_block(d, m, pdef, exts)
     d.stats = stats
+    if progress is not None:
+        progress(len(exts), len(exts))
     log.info("plot of %s: %s", m.id, d.summary() if d.stats else "")
     return d
 
