@@ -86,8 +86,8 @@ def convert(paths, to_format, driver, src_driver, to_crs, layer_map, snap, jobs,
     if not batch:
         with progress_bar(1000, f"converting {sources[0]}") as bar:
 
-            def advance(fraction):
-                bar.update(round(1000 * fraction) - bar.pos)
+            def advance(done, total):
+                bar.update(round(1000 * done / max(total, 1)) - bar.pos)
 
             res = convert_file(sources[0], dst, driver=driver, progress=advance, **common)
         if not res.ok:
@@ -102,11 +102,15 @@ def convert(paths, to_format, driver, src_driver, to_crs, layer_map, snap, jobs,
     with progress_bar(len(sources), f"converting to {to_format}") as bar:
 
         def report(res):
-            bar.update(1)
             if not res.ok:
                 failed.append(res)
 
-        results = convert_many(sources, dst, to_format, jobs=jobs, progress=report, **common)
+        def advance_batch(done, total):
+            bar.update(done - bar.pos)
+
+        results = convert_many(
+            sources, dst, to_format, jobs=jobs, progress=advance_batch, on_result=report, **common
+        )
     for res in results:
         if res.ok:
             click.echo(

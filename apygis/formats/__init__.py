@@ -75,6 +75,8 @@ class Driver:
         ``reader(path, **options) -> MapFile``.
     writer : callable, optional
         ``writer(map, path, **options) -> list[Path]`` (the files written).
+        Readers and writers take ``progress=None``, called as
+        ``progress(done, total)`` (:mod:`apygis.progress`).
     probe : callable, optional
         ``probe(path) -> bool``: True if ``path`` holds (or names) data of this format.
     outputs : callable, optional
@@ -254,6 +256,7 @@ def write(map, path, driver: str | None = None, **options) -> list[Path]:
     Only regular files are replaced (a symlink is written through). A set of
     files gets a set stamp (see :mod:`apygis.formats._io`). Any ``OSError``
     is a :class:`~apygis.errors.WriteError` naming the target.
+    ``**options`` go to the driver (``progress(done, total)``, :mod:`apygis.progress`).
     Returns the paths written.
     """
     drv = get_driver(driver, "w") if driver else driver_for(path, "w")

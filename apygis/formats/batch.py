@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from apygis.errors import ApygisError, FileOverwriteError
+from apygis.progress import STEPS, Progress, phase
 
 __all__ = ["Result", "convert_file", "convert_many", "expand_sources", "output_name"]
 
@@ -92,25 +93,26 @@ def convert_file(
     overwrite: bool = False,
     to_crs=None,
     read_options: dict | None = None,
-    progress: Callable[[float], None] | None = None,
+    progress: Progress | None = None,
 ) -> Result:
     """Convert one file; errors a user can cause come back in ``Result.error``.
 
-    ``progress(fraction)`` is called with the part done, 0 to 1: reading is
-    the first half, writing the second (for drivers that report progress).
+    ``progress(done, total)`` (:mod:`apygis.progress`) with ``total``
+    :data:`~apygis.progress.STEPS`: reading is the first half, writing the
+    second (as far as the drivers report progress); the last call, on
+    success, is ``(STEPS, STEPS)``.
     """
     import apygis
     from apygis.formats import driver_for, get_driver, verify_set
 
-    def phase(offset):
-        if progress is None:
-            return {}
-        return {"progress": lambda done, total: progress(offset + 0.5 * done / max(total, 1))}
+    def step(index):
+        cb = phase(progress, index, 2)
+        return {} if cb is None else {"progress": cb}
 
     writing = False
     try:
         in_drv = get_driver(src_driver, "r") if src_driver else driver_for(src, "r")
-        opts = {**(read_options or {}), **phase(0.0)}
+        opts = {**(read_options or {}), **step(0)}
         verify_set(in_drv, src)  # a set half-replaced by an interrupted write is refused
         m = in_drv.reader(os.fspath(src), **_accepted(in_drv.reader, opts))
         if to_crs is not None:
@@ -133,9 +135,9 @@ def convert_file(
                 verb = "exists" if len(existing) == 1 else "exist"
                 raise FileOverwriteError(f"{what} {verb}; use --overwrite")
         writing = True
-        written = apygis.write(m, dst, driver=out_drv.name, **_accepted(out_drv.writer, phase(0.5)))
+        written = apygis.write(m, dst, driver=out_drv.name, **_accepted(out_drv.writer, step(1)))
         if progress is not None:
-            progress(1.0)
+            progress(STEPS, STEPS)
         return Result(src, [str(p) for p in written], sum(len(lay) for lay in m), len(m.layers))
     except ApygisError as exc:
         return Result(src, error=str(exc))
@@ -154,7 +156,8 @@ def convert_many(
     to_driver: str,
     *,
     jobs: int = 1,
-    progress: Callable[[Result], None] | None = None,
+    progress: Progress | None = None,
+    on_result: Callable[[Result], None] | None = None,
     **kwargs,
 ) -> list[Result]:
     """Convert every source into ``outdir`` with ``to_driver``; one failure stops nothing.
@@ -169,8 +172,11 @@ def convert_many(
         Output driver name.
     jobs : int
         Worker processes (1: convert in this process).
-    progress : callable, optional
-        Called with each :class:`Result` as it completes.
+    progress : Progress, optional
+        ``progress(done, total)`` as each source is finished, ``total`` the
+        number of sources (:mod:`apygis.progress`).
+    on_result : callable, optional
+        Called with each :class:`Result` as it completes (before ``progress``).
     **kwargs
         Passed to :func:`convert_file` (``overwrite``, ``src_driver``,
         ``to_crs``, ``read_options``).
@@ -188,20 +194,21 @@ def convert_many(
     targets: dict[str, str] = {}
     results: dict[int, Result] = {}
     plan = []
-    for i, src in enumerate(sources):
-        name = output_name(src, to_driver)
-        if name in targets:
-            results[i] = Result(src, error=f"output {name} would collide with {targets[name]}")
-            if progress:
-                progress(results[i])
-            continue
-        targets[name] = src
-        plan.append((i, src, str(outdir / name)))
 
     def done(i, res):
         results[i] = res
+        if on_result:
+            on_result(res)
         if progress:
-            progress(res)
+            progress(len(results), len(sources))
+
+    for i, src in enumerate(sources):
+        name = output_name(src, to_driver)
+        if name in targets:
+            done(i, Result(src, error=f"output {name} would collide with {targets[name]}"))
+            continue
+        targets[name] = src
+        plan.append((i, src, str(outdir / name)))
 
     if jobs <= 1 or len(plan) <= 1:
         for i, src, dst in plan:

@@ -57,13 +57,21 @@ def test_library_batch_results_in_source_order(sample_dir, tmp_path):
         str(tmp_path / "missing.apa"),
         str(sample_dir / "ZH1091"),
     ]
-    seen = []
-    results = convert_many(srcs, tmp_path / "o", "apy", jobs=2, progress=seen.append)
+    seen, calls = [], []
+    results = convert_many(
+        srcs,
+        tmp_path / "o",
+        "apy",
+        jobs=2,
+        on_result=seen.append,
+        progress=lambda done, total: calls.append((done, total)),
+    )
     assert [r.source for r in results] == srcs
     assert [r.ok for r in results] == [True, False, False]
     assert "no such file" in results[1].error
     assert "collide" in results[2].error  # ZH1091.apa and ZH1091 both make ZH1091
     assert len(seen) == 3
+    assert calls == [(1, 3), (2, 3), (3, 3)]
 
 
 def test_expand_sources_keeps_unmatched_globs(tmp_path):
@@ -96,12 +104,17 @@ def test_single_conversion_reports_progress(sample_dir, tmp_path):
     from apygis.formats.batch import convert_file
 
     seen = []
-    res = convert_file(str(sample_dir / "ZH1091"), str(tmp_path / "x.gpkg"), progress=seen.append)
+    res = convert_file(
+        str(sample_dir / "ZH1091"),
+        str(tmp_path / "x.gpkg"),
+        progress=lambda done, total: seen.append((done, total)),
+    )
     assert res.ok
     assert len(seen) > 4
+    assert {t for _, t in seen} == {1000}
     assert seen == sorted(seen)
-    assert seen[0] > 0
-    assert seen[-1] == 1.0
+    assert seen[0][0] > 0
+    assert seen[-1] == (1000, 1000)
 
 
 def test_batch_failure_on_a_full_disk_names_the_target(sample_dir, tmp_path, monkeypatch):

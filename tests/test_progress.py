@@ -1,0 +1,193 @@
+"""Every ``progress=`` of apygis is the one callback of :mod:`apygis.progress`.
+
+Each public function taking ``progress`` is called on the sample sheet with a
+recording callback; its calls must be ``(done, total)`` ints with
+``0 <= done <= total``, one ``total`` per operation, ``done`` never going
+down, and ``done == total`` at the end. A new public function with a
+``progress`` parameter fails :func:`test_every_progress_function_is_checked`
+until it is added here.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import pkgutil
+
+import pytest
+
+import apygis
+from apygis.formats import Driver, get_driver
+from apygis.progress import STEPS, Progress, fraction, phase
+
+# driver name -> the target of a write of the sample (as tests/formats/test_write_safety.py)
+TARGETS = {
+    "apy": "M",
+    "ascii": "M.apa",
+    "dxf": "M.dxf",
+    "e00": "M.e00",
+    "generate": "M.gen",
+    "gpkg": "M.gpkg",
+    "shp": "out",
+    "geojson": "out",
+    "fgb": "out",
+}
+
+# public functions with a progress parameter that are not driver readers or writers,
+# each exercised by a test below
+OTHERS = {
+    "apygis.formats.batch.convert_file",
+    "apygis.formats.batch.convert_many",
+    "apygis.formats.dxf.encode",
+    "apygis.plot.drawing.build_drawing",
+}
+# called by the gpkg, shp, geojson and fgb drivers' readers and writers (closures)
+OTHERS |= {"apygis.formats.ogr.read", "apygis.formats.ogr.write"}
+# the helpers of apygis.progress take a callback to wrap, they do not report
+HELPERS = {"apygis.progress.phase"}
+
+
+class Recorder:
+    """A progress callback that keeps its calls."""
+
+    def __init__(self):
+        self.calls: list[tuple[int, int]] = []
+
+    def __call__(self, done: int, total: int, /) -> None:
+        self.calls.append((done, total))
+
+
+def check_calls(calls, what=""):
+    """The conventions of apygis.progress, for the calls of one operation."""
+    assert calls, f"{what}: no progress reported"
+    for done, total in calls:
+        assert type(done) is int, f"{what}: done {done!r} is not an int"
+        assert type(total) is int, f"{what}: total {total!r} is not an int"
+        assert 0 <= done <= total, f"{what}: {done} of {total}"
+    assert len({t for _, t in calls}) == 1, f"{what}: total changed: {calls}"
+    dones = [d for d, _ in calls]
+    assert dones == sorted(dones), f"{what}: done went down: {calls}"
+    assert calls[-1][0] == calls[-1][1], f"{what}: the last call is not done: {calls}"
+
+
+def _public_progress_functions() -> set[str]:
+    found = set()
+    for info in pkgutil.walk_packages(apygis.__path__, "apygis."):
+        mod = importlib.import_module(info.name)
+        for name, obj in vars(mod).items():
+            if name.startswith("_") or getattr(obj, "__module__", None) != mod.__name__:
+                continue
+            funcs = []
+            if inspect.isfunction(obj):
+                funcs = [(name, obj)]
+            elif inspect.isclass(obj):
+                funcs = [
+                    (f"{name}.{n}", f)
+                    for n, f in vars(obj).items()
+                    if inspect.isfunction(f) and not n.startswith("_")
+                ]
+            for qual, f in funcs:
+                if "progress" in inspect.signature(f).parameters:
+                    found.add(f"{mod.__name__}.{qual}")
+    return found
+
+
+def _qualname(f) -> str:
+    f = getattr(f, "func", f)  # functools.partial (the OGR drivers)
+    return f"{f.__module__}.{f.__qualname__}"
+
+
+def _driver_functions() -> set[str]:
+    out = set()
+    for name in TARGETS:
+        drv = get_driver(name)
+        out.update(_qualname(f) for f in (drv.reader, drv.writer) if f is not None)
+    return out
+
+
+def test_every_progress_function_is_checked():
+    checked = _driver_functions() | OTHERS | HELPERS
+    unchecked = sorted(_public_progress_functions() - checked)
+    assert not unchecked, (
+        "public functions taking progress= that tests/test_progress.py does not call: "
+        + ", ".join(unchecked)
+    )
+    assert set(TARGETS) == set(apygis.drivers()), "a driver is not checked"
+
+
+def test_every_progress_function_documents_the_signature():
+    """A function's own docstring names ``(done, total)``, or the contract it follows does."""
+    contract = (Driver.__doc__ or "") + (apygis.read.__doc__ or "") + (apygis.write.__doc__ or "")
+    assert "apygis.progress" in contract, "the Driver contract does not name apygis.progress"
+    for qual in sorted(OTHERS - _driver_functions()):
+        mod, name = qual.rsplit(".", 1)
+        doc = getattr(importlib.import_module(mod), name).__doc__ or ""
+        assert "progress(done, total)" in doc or "Progress" in doc, f"{qual}: not documented"
+
+
+@pytest.mark.parametrize("name", sorted(TARGETS))
+def test_driver_progress(name, sample_map, tmp_path):
+    target = tmp_path / TARGETS[name]
+    rec = Recorder()
+    apygis.write(sample_map, target, driver=name, progress=rec)
+    check_calls(rec.calls, f"{name} write")
+    rec = Recorder()
+    apygis.read(target, driver=name, progress=rec)
+    check_calls(rec.calls, f"{name} read")
+
+
+def test_dxf_encode_progress(sample_map):
+    from apygis.formats.dxf import encode
+
+    rec = Recorder()
+    encode(sample_map, progress=rec)
+    check_calls(rec.calls, "dxf.encode")
+
+
+def test_build_drawing_progress(sample_map):
+    from apygis.plot.drawing import build_drawing
+
+    rec = Recorder()
+    build_drawing(sample_map, progress=rec)
+    check_calls(rec.calls, "build_drawing")
+    assert rec.calls[-1] == (len(sample_map.layers), len(sample_map.layers))
+    rec = Recorder()
+    build_drawing(apygis.MapFile("E", scale=1000), progress=rec)
+    assert rec.calls == [(0, 0)]  # nothing to do: done at once
+
+
+def test_convert_file_progress(sample_dir, tmp_path):
+    from apygis.formats.batch import convert_file
+
+    rec = Recorder()
+    res = convert_file(str(sample_dir / "ZH1091"), str(tmp_path / "x.dxf"), progress=rec)
+    assert res.ok, res.error
+    check_calls(rec.calls, "convert_file")
+    assert rec.calls[-1] == (STEPS, STEPS)
+
+
+def test_convert_many_progress(sample_dir, tmp_path):
+    from apygis.formats.batch import convert_many
+
+    rec = Recorder()
+    srcs = [str(sample_dir / "ZH1091"), str(tmp_path / "missing.apa")]
+    results = convert_many(srcs, tmp_path / "o", "ascii", progress=rec)
+    assert [r.ok for r in results] == [True, False]
+    check_calls(rec.calls, "convert_many")
+    assert rec.calls == [(1, 2), (2, 2)]
+
+
+def test_the_protocol_and_helpers():
+    rec = Recorder()
+    assert isinstance(rec, Progress)
+    assert phase(None, 0, 2) is None
+    first, second = phase(rec, 0, 2), phase(rec, 1, 2)
+    first(0, 3)
+    first(3, 3)
+    first(1, 3)  # a step going back does not move the whole back
+    second(0, 0)
+    check_calls(rec.calls, "phase")
+    assert rec.calls == [(0, STEPS), (500, STEPS), (500, STEPS), (STEPS, STEPS)]
+    assert fraction(5, 4) == 1.0
+    with pytest.raises(ValueError, match="step 2 of 2"):
+        phase(rec, 2, 2)
