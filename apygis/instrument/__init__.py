@@ -7,10 +7,15 @@ convert to and from ground coordinates.
 
 - :mod:`~apygis.instrument.tablet`: tablet protocol parsers and encoders
   (Summagraphics MM binary, CalComp binary, ASCII);
-- :mod:`~apygis.instrument.motors`: the four plate stepper motors over
-  G-code (grbl / grblHAL), a client and a simulated controller;
+- :mod:`~apygis.instrument.pad`: the 27-button cursor pad (the button
+  names and codes, the single definition) and pad files;
+- :mod:`~apygis.instrument.grbl`: the G-code dialect of the four plate
+  stepper motors (grbl / grblHAL): move lines, status reports, error codes;
+- :mod:`~apygis.instrument.motors`: the motor controller client (serial
+  connection, flow control, queue of unanswered lines);
+- :mod:`~apygis.instrument.simgrbl`: a simulated grblHAL controller;
 - :mod:`~apygis.instrument.simulator`: scripts of cursor moves, button
-  presses and typing, turned into tablet bytes; the 27-button pad;
+  presses and typing, turned into tablet bytes;
 - :mod:`~apygis.instrument.replay`: record the raw bytes of a session and
   replay them.
 
@@ -21,25 +26,17 @@ The formats are specified in ``docs/protocols.md`` and ``docs/button-pad.md``.
 
 from __future__ import annotations
 
-from apygis.instrument.motors import (
-    AXES,
-    MotorController,
-    MotorStatus,
-    SimulatedGrbl,
-    format_move,
-    open_controller,
-    parse_status,
-)
+from apygis.instrument.grbl import AXES, MotorStatus, format_move, parse_status
+from apygis.instrument.motors import MotorController, open_controller
+from apygis.instrument.pad import BUTTON_CODES, BUTTONS, button_code
 from apygis.instrument.replay import Chunk, Recorder, RecordingPort, Replayer, ReplayPort
+from apygis.instrument.simgrbl import SimulatedGrbl
 from apygis.instrument.simulator import (
-    BUTTON_CODES,
-    BUTTONS,
     KeyEvent,
     Script,
     ScriptBuilder,
     TabletEvent,
     VirtualInstrument,
-    button_code,
     parse_script,
     read_script,
 )

@@ -14,34 +14,25 @@ Z     right photo, x plate
 A     right photo, y plate
 ====  ==============================================
 
-The dialect (``docs/protocols.md`` has it in full):
+Three modules, along the seams of the protocol:
 
-- positions are **absolute motor steps**, integers. The controller is set
-  up with one step per unit on every axis (``$100=1 $101=1 $102=1
-  $103=1``), so a G-code coordinate *is* a step count; the client puts the
-  controller in ``G21 G90`` (millimetre units, absolute distances) when it
-  connects;
-- one move is one line: ``G0 X120 Y-35 Z98 A-40`` (rapid) or
-  ``G1 X120 Y-35 F6000`` (feed in steps per minute), only the axes that
-  move; ``G92 X0 Y0 Z0 A0`` sets the current position (the plates' zero,
-  "eliminate parallax" in the seed);
-- lines end with LF alone (grbl answers a CR LF pair with two ``ok``);
-  every line is answered by ``ok`` or ``error:N``; ``ALARM:N``, ``[MSG:...]``
-  and the banner ``Grbl ...`` / ``GrblHAL ...`` come unasked;
-- ``?`` (no LF: a real-time command) asks for a status report
-  ``<Idle|MPos:120.000,-35.000,98.000,-40.000|FS:0,0>``; Ctrl-X (0x18) is a
-  soft reset, answered by the banner.
+- :mod:`apygis.instrument.grbl`: the dialect, no I/O -- G-code move lines
+  (:func:`format_move`), status reports (:func:`parse_status`,
+  :class:`MotorStatus`), the error and alarm codes;
+- this module: the client, :class:`MotorController` (serial connection,
+  flow control by character counting, the queue of unanswered lines) and
+  :func:`open_controller`;
+- :mod:`apygis.instrument.simgrbl`: :class:`SimulatedGrbl`, the controller
+  side in software (on a pty or a loopback TCP socket), so that no test
+  needs hardware.
 
-:class:`MotorController` speaks the client side, :class:`SimulatedGrbl` the
-controller side (on a pty or a loopback TCP socket), so that no test needs
-hardware.
+The names of the dialect and the simulated controller are importable from
+here too. ``docs/protocols.md`` specifies the dialect in full.
 
 Examples
 --------
 >>> format_move(x=120, y=-35)
 'G0 X120 Y-35'
->>> format_move(z=98, a=-40, feed=6000)
-'G1 Z98 A-40 F6000'
 >>> parse_status("<Idle|MPos:120.000,-35.000,0.000,0.000|FS:0,0>").steps
 (120, -35, 0, 0)
 """
@@ -51,16 +42,22 @@ from __future__ import annotations
 import collections
 import contextlib
 import logging
-import operator
-import os
-import re
-import select
-import socket
-import threading
 import time
-from dataclasses import dataclass, field
 
-from apygis.errors import InstrumentError, MotorError, ProtocolError
+from apygis.errors import MotorError, ProtocolError
+from apygis.instrument.grbl import (
+    AXES,
+    BANNER,
+    GRBL_ALARMS,
+    GRBL_ERRORS,
+    REALTIME,
+    RESET,
+    STATUS_QUERY,
+    MotorStatus,
+    format_move,
+    parse_status,
+)
+from apygis.instrument.simgrbl import SimulatedGrbl
 
 __all__ = [
     "AXES",
@@ -75,148 +72,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-#: The four axes: left photo x, y plates, right photo x, y plates.
-AXES = ("X", "Y", "Z", "A")
-
-#: grbl 1.1 error codes (the ones a plate driver meets).
-GRBL_ERRORS = {
-    1: "G-code words consist of a letter and a value; letter was not found",
-    2: "missing the expected G-code word value or numeric value format is not valid",
-    3: "grbl '$' system command was not recognized or supported",
-    5: "homing cycle failure; homing is not enabled via settings",
-    8: "grbl '$' command cannot be used unless grbl is idle",
-    9: "G-code commands are locked out during alarm or jog state",
-    11: "max characters per line exceeded; received command line was not executed",
-    15: "jog target exceeds machine travel (soft limits)",
-    20: "unsupported or invalid g-code command found in block",
-    21: "more than one g-code command from same modal group found in block",
-    22: "feed rate has not yet been set or is undefined",
-    24: "two G-code commands that both require the use of the XYZ axis words were detected",
-    25: "a G-code word was repeated in the block",
-    26: "a G-code command implicitly or explicitly requires XYZ axis words in the block",
-}
-
-#: grbl 1.1 alarm codes.
-GRBL_ALARMS = {
-    1: "hard limit triggered",
-    2: "soft limit: motion target exceeds machine travel",
-    3: "reset while in motion; position may be lost",
-    4: "probe fail",
-    5: "probe fail",
-    6: "homing fail: reset during active homing cycle",
-    7: "homing fail: safety door was opened during homing",
-    8: "homing fail: pull off travel failed to clear limit switch",
-    9: "homing fail: could not find limit switch",
-    10: "homing fail: second dual axis limit switch failed",
-    11: "homing required",
-}
-
-_BANNER = re.compile(r"^(Grbl|GrblHAL)\s+\S+")
-_REALTIME = frozenset("?!~\x18")
-RESET = b"\x18"
-
-
-def _int(name: str, value) -> int:
-    try:
-        return operator.index(value)
-    except TypeError:
-        raise ProtocolError(f"{name} must be an integer number of steps, not {value!r}") from None
-
-
-def format_move(x=None, y=None, z=None, a=None, *, feed=None, word: str | None = None) -> str:
-    """One G-code move line to absolute step positions (only the given axes).
-
-    ``G0`` (rapid) without ``feed``, ``G1 ... F<feed>`` with it (steps per
-    minute); ``word`` overrides the G word (``"G92"`` to set the position).
-    """
-    parts = [word or ("G0" if feed is None else "G1")]
-    for axis, value in zip(AXES, (x, y, z, a), strict=True):
-        if value is not None:
-            parts.append(f"{axis}{_int(axis, value)}")
-    if len(parts) == 1:
-        raise ProtocolError("a move needs at least one of the axes X, Y, Z, A")
-    if feed is not None and word is None:
-        f = float(feed)
-        if not f > 0:
-            raise ProtocolError(f"feed must be positive, not {feed!r}")
-        parts.append(f"F{f:g}")
-    return " ".join(parts)
-
-
-@dataclass(frozen=True)
-class MotorStatus:
-    """A parsed grbl status report ``<State|MPos:...|...>``.
-
-    Attributes
-    ----------
-    state : str
-        ``Idle``, ``Run``, ``Hold``, ``Jog``, ``Alarm``, ``Door``, ``Check``,
-        ``Home`` or ``Sleep``.
-    substate : int or None
-        The number after ``Hold:`` or ``Door:``.
-    mpos : tuple of float
-        Machine position (one value an axis), when reported.
-    wpos : tuple of float or None
-        Work position, when reported (or derived from ``MPos`` and ``WCO``).
-    fields : dict
-        Every field as text (``{"FS": "0,0", ...}``).
-    raw : str
-        The report line.
-    """
-
-    state: str
-    substate: int | None
-    mpos: tuple[float, ...] | None
-    wpos: tuple[float, ...] | None
-    fields: dict[str, str] = field(default_factory=dict)
-    raw: str = ""
-
-    @property
-    def steps(self) -> tuple[int, ...] | None:
-        """Machine position rounded to whole steps."""
-        return None if self.mpos is None else tuple(round(v) for v in self.mpos)
-
-    @property
-    def idle(self) -> bool:
-        return self.state == "Idle"
-
-
-def _floats(text: str, raw: str) -> tuple[float, ...]:
-    try:
-        return tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise ProtocolError(f"bad number in grbl status report {raw!r}") from None
-
-
-def parse_status(line: str) -> MotorStatus:
-    """Parse a grbl 1.1 status report line, ``<Idle|MPos:0.000,0.000,0.000,0.000|FS:0,0>``."""
-    raw = line.strip()
-    if not (raw.startswith("<") and raw.endswith(">")) or len(raw) < 3:
-        raise ProtocolError(f"not a grbl status report: {line!r}")
-    parts = raw[1:-1].split("|")
-    state, _, sub = parts[0].partition(":")
-    if not state.isalpha():
-        raise ProtocolError(f"bad machine state in grbl status report {line!r}")
-    substate = int(sub) if sub.isdigit() else None
-    fields = {}
-    for p in parts[1:]:
-        key, sep, value = p.partition(":")
-        if not sep:
-            raise ProtocolError(f"bad field {p!r} in grbl status report {line!r}")
-        fields[key] = value
-    mpos = _floats(fields["MPos"], raw) if "MPos" in fields else None
-    wpos = _floats(fields["WPos"], raw) if "WPos" in fields else None
-    if "WCO" in fields:
-        wco = _floats(fields["WCO"], raw)
-        if mpos is None and wpos is not None:
-            mpos = tuple(w + o for w, o in zip(wpos, wco, strict=False))
-        elif wpos is None and mpos is not None:
-            wpos = tuple(m - o for m, o in zip(mpos, wco, strict=False))
-    return MotorStatus(state, substate, mpos, wpos, fields, raw)
-
-
-# --------------------------------------------------------------------------- client
 
 
 class _Sent:
@@ -420,7 +275,7 @@ class MotorController:
         """Ask for a status report (``?``) and return it parsed."""
         self._raise_failed()
         self.last_status = None
-        self._write(b"?")
+        self._write(STATUS_QUERY)
         deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
         while self.last_status is None:
             if not self._process_one(deadline):
@@ -480,7 +335,7 @@ class MotorController:
     def _send(self, line: str) -> _Sent:
         self._raise_failed()
         line = line.strip()
-        if not line or any(c in _REALTIME or c in "\r\n" for c in line):
+        if not line or any(c in REALTIME or c in "\r\n" for c in line):
             raise ProtocolError(
                 f"{self.name}: a G-code line must be one non-empty line without the "
                 f"real-time characters ? ! ~ ^X: {line!r}"
@@ -612,7 +467,7 @@ class MotorController:
                 self.last_status = parse_status(line)
             except ProtocolError as exc:
                 log.warning("%s: %s", self.name, exc)
-        elif _BANNER.match(line):
+        elif BANNER.match(line):
             self.banner = line
             if self._connecting:
                 log.info("%s: %s", self.name, line)
@@ -658,371 +513,3 @@ def open_controller(
             ctl.close()
             raise
     return ctl
-
-
-# --------------------------------------------------------------------------- simulator
-
-_WORD = re.compile(r"([A-Z])([-+]?(?:\d+\.?\d*|\.\d+))")
-
-
-class SimulatedGrbl:
-    """A grblHAL controller for four axes, in software: the other end of :class:`MotorController`.
-
-    It answers the protocol of a real controller: the banner after Ctrl-X,
-    ``ok``, ``error:N`` (bad words, unsupported commands, ``G1`` without a
-    feed rate, lines too long, a move beyond the soft limits), ``?`` status
-    reports with the machine position, ``$X``, ``$$``, ``$G``, ``G92``.
-    Moves complete at once (the state is always ``Idle``).
-
-    Parameters
-    ----------
-    banner : str
-        The startup line.
-    limits : (float, float) or dict
-        Soft limits in steps, one range for every axis or one per axis.
-    soft_limit_alarm : bool
-        False: a move beyond the limits is refused with ``error:15`` and the
-        position kept. True (what grbl does for G-code moves): ``ALARM:2``,
-        no answer to anything until a soft reset, then the alarm state until
-        ``$X``.
-    banner_on_connect : bool
-        Print the banner when a TCP client connects (a controller that
-        boots on connection).
-
-    Attributes
-    ----------
-    mpos : dict
-        Machine position in steps, by axis.
-    mute : bool
-        Set True to stop answering (to test timeouts).
-    received : list of str
-        Every line received, in order.
-
-    Examples
-    --------
-    >>> sim = SimulatedGrbl()
-    >>> sim.handle(b"G0 X5 A-2\\n?")
-    b'ok\\r\\n<Idle|MPos:5.000,0.000,0.000,-2.000|FS:0,0>\\r\\n'
-    >>> sim.handle(b"G1 X1\\n")
-    b'error:22\\r\\n'
-    """
-
-    def __init__(
-        self,
-        *,
-        banner: str = "GrblHAL 1.1f ['$' or '$HELP' for help]",
-        limits=(-100000, 100000),
-        soft_limit_alarm: bool = False,
-        banner_on_connect: bool = False,
-    ):
-        self.banner = banner
-        if isinstance(limits, dict):
-            self.limits = {ax: tuple(limits[ax]) for ax in AXES}
-        else:
-            self.limits = dict.fromkeys(AXES, tuple(limits))
-        self.soft_limit_alarm = soft_limit_alarm
-        self.banner_on_connect = banner_on_connect
-        self.mpos = dict.fromkeys(AXES, 0.0)
-        self.wco = dict.fromkeys(AXES, 0.0)
-        self.absolute = True
-        self.motion = "G0"
-        self.feed: float | None = None
-        self.alarm: int | None = None
-        self.critical = False
-        self.mute = False
-        self.received: list[str] = []
-        self._line = bytearray()
-        self._outbox = bytearray()
-        self._lock = threading.RLock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._closers: list = []
-        self.url: str | None = None
-
-    # ---- protocol core
-
-    def handle(self, data: bytes) -> bytes:
-        """Take bytes from the client; return the controller's answer bytes."""
-        out = []
-        with self._lock:
-            if self._outbox:
-                out.append(self.take_output().decode("ascii", "replace"))
-            for c in data:
-                if c == 0x18:
-                    self._line.clear()
-                    self._reset(out)
-                elif c == 0x3F:  # ?
-                    if not self.mute:
-                        out.append(self._status())
-                elif c in (0x21, 0x7E) or c >= 0x80:  # ! ~ and extended real-time commands
-                    continue
-                elif c in (0x0A, 0x0D):
-                    line = self._line.decode("ascii", "replace")
-                    self._line.clear()
-                    if self.critical or self.mute:
-                        continue
-                    self.received.append(line)
-                    out.append(self._execute(line))
-                else:
-                    self._line.append(c)
-        return "".join(out).encode("ascii")
-
-    def emit(self, data: bytes | str) -> None:
-        """Send unasked bytes to the client (an ``ALARM:1``, a banner after a power glitch).
-
-        The serving thread sends them within 50 ms; with :meth:`handle` alone
-        they come out with the next answer (or :meth:`take_output`).
-        """
-        with self._lock:
-            self._outbox += data.encode("ascii") if isinstance(data, str) else data
-
-    def take_output(self) -> bytes:
-        """The bytes given to :meth:`emit` and not yet sent."""
-        with self._lock:
-            out = bytes(self._outbox)
-            self._outbox.clear()
-            return out
-
-    def _reset(self, out: list) -> None:
-        self.motion, self.absolute, self.feed = "G0", True, None
-        out.append(f"\r\n{self.banner}\r\n")
-        if self.critical:
-            self.critical = False
-            self.alarm = 2
-            out.append("[MSG:'$H'|'$X' to unlock]\r\n")
-
-    def _status(self) -> str:
-        state = "Alarm" if self.alarm else "Idle"
-        mpos = ",".join(f"{self.mpos[a]:.3f}" for a in AXES)
-        s = f"<{state}|MPos:{mpos}|FS:0,0"
-        if any(self.wco.values()):
-            s += "|WCO:" + ",".join(f"{self.wco[a]:.3f}" for a in AXES)
-        return s + ">\r\n"
-
-    def _execute(self, line: str) -> str:
-        if len(line) > 255:
-            return "error:11\r\n"
-        text = re.sub(r"\([^)]*\)|;.*$", "", line).replace(" ", "").replace("\t", "").upper()
-        if not text:
-            return "ok\r\n"
-        if text.startswith("$"):
-            return self._system(text)
-        words = []
-        pos = 0
-        while pos < len(text):
-            m = _WORD.match(text, pos)
-            if m is None:
-                return "error:2\r\n" if "A" <= text[pos] <= "Z" else "error:1\r\n"
-            words.append(m.groups())
-            pos = m.end()
-        if self.alarm:
-            return "error:9\r\n"
-        motion = None
-        g92 = False
-        absolute = self.absolute
-        axes: dict[str, float] = {}
-        feed = None
-        seen = set()
-        for letter, number in words:
-            value = float(number)
-            if letter == "G":
-                code = number.lstrip("+")
-                if code in ("0", "00", "1", "01"):
-                    if motion is not None:
-                        return "error:21\r\n"
-                    motion = "G" + str(int(value))
-                elif code == "90":
-                    absolute = True
-                elif code == "91":
-                    absolute = False
-                elif code == "21":
-                    pass
-                elif code == "92":
-                    g92 = True
-                else:
-                    return "error:20\r\n"
-            elif letter in AXES:
-                if letter in axes:
-                    return "error:25\r\n"
-                axes[letter] = value
-            elif letter == "F":
-                if letter in seen:
-                    return "error:25\r\n"
-                if value <= 0:
-                    return "error:2\r\n"
-                feed = value
-            elif letter == "N":
-                pass
-            else:
-                return "error:20\r\n"
-            seen.add(letter)
-        if g92 and motion is not None:
-            return "error:24\r\n"
-        if g92:
-            if not axes:
-                return "error:26\r\n"
-            for ax, v in axes.items():
-                self.wco[ax] = self.mpos[ax] - v
-            self.absolute = absolute
-            return "ok\r\n"
-        motion = motion or self.motion
-        if feed is not None:
-            self.feed = feed
-        if axes and motion == "G1" and self.feed is None:
-            return "error:22\r\n"
-        target = dict(self.mpos)
-        for ax, v in axes.items():
-            target[ax] = v + self.wco[ax] if absolute else self.mpos[ax] + v
-        for ax, v in target.items():
-            lo, hi = self.limits[ax]
-            if not lo <= v <= hi:
-                if self.soft_limit_alarm:
-                    self.critical = True
-                    return "ALARM:2\r\n[MSG:Reset to continue]\r\n"
-                return "error:15\r\n"
-        self.absolute = absolute
-        self.motion = motion
-        self.mpos = target
-        return "ok\r\n"
-
-    def _system(self, text: str) -> str:
-        if text == "$X":
-            msg = "[MSG:Caution: Unlocked]\r\n" if self.alarm else ""
-            self.alarm = None
-            return msg + "ok\r\n"
-        if text == "$$":
-            lines = [f"${n}=1.000" for n in (100, 101, 102, 103)]
-            return "\r\n".join(lines) + "\r\nok\r\n"
-        if text == "$G":
-            mode = "G90" if self.absolute else "G91"
-            feed = f"{self.feed:g}" if self.feed else "0"
-            return f"[GC:{self.motion} G54 G17 G21 {mode} G94 M5 M9 T0 F{feed} S0]\r\nok\r\n"
-        if text in ("$I",):
-            return f"[VER:{self.banner.split()[1]}:apygis simulator]\r\nok\r\n"
-        if text == "$H":
-            return "error:5\r\n"
-        return "error:3\r\n"
-
-    # ---- transports
-
-    def serve_pty(self) -> str:
-        """Serve on a new pseudo-terminal in a daemon thread; return the slave's path.
-
-        Open the path with ``serial.serial_for_url(path)``.
-        """
-        self._check_idle()
-        import tty
-
-        master, slave = os.openpty()
-        tty.setraw(slave)
-        path = os.ttyname(slave)
-        self._closers = [lambda: os.close(master), lambda: os.close(slave)]
-        self.url = path
-        self._start(self._run_pty, master)
-        return path
-
-    def serve_tcp(self, host: str = "127.0.0.1", port: int = 0) -> str:
-        """Serve on a TCP socket in a daemon thread; return ``socket://HOST:PORT``.
-
-        One client at a time; port 0 picks a free port.
-        """
-        self._check_idle()
-        srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            srv.bind((host, port))
-            srv.listen(1)
-        except OSError as exc:
-            srv.close()
-            raise InstrumentError(f"cannot listen on {host}:{port}: {exc}") from exc
-        srv.settimeout(0.05)
-        self._closers = [srv.close]
-        h, p = srv.getsockname()[:2]
-        self.url = f"socket://{h}:{p}"
-        self._start(self._run_tcp, srv)
-        return self.url
-
-    def stop(self, timeout: float = 2.0) -> None:
-        """Stop serving and close the pty or socket."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout)
-            self._thread = None
-        for close in self._closers:
-            with contextlib.suppress(OSError):
-                close()
-        self._closers = []
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.stop()
-
-    def _check_idle(self) -> None:
-        if self._thread is not None:
-            raise InstrumentError("the simulated controller is already serving")
-        self._stop.clear()
-
-    def _start(self, target, *args) -> None:
-        self._thread = threading.Thread(target=target, args=args, name="SimulatedGrbl", daemon=True)
-        self._thread.start()
-
-    def _run_pty(self, fd: int) -> None:
-        try:
-            while not self._stop.is_set():
-                r, _, _ = select.select([fd], [], [], 0.05)
-                if self._outbox:
-                    os.write(fd, self.take_output())
-                if not r:
-                    continue
-                try:
-                    data = os.read(fd, 4096)
-                except OSError:
-                    time.sleep(0.01)
-                    continue
-                reply = self.handle(data)
-                if reply:
-                    os.write(fd, reply)
-        except Exception:  # pragma: no cover - a thread must not die silently
-            log.exception("simulated controller (pty) stopped")
-
-    def _run_tcp(self, srv: socket.socket) -> None:
-        try:
-            while not self._stop.is_set():
-                try:
-                    conn, _ = srv.accept()
-                except TimeoutError:
-                    continue
-                except OSError:
-                    return
-                with conn:
-                    self._serve_conn(conn)
-        except Exception:  # pragma: no cover
-            log.exception("simulated controller (tcp) stopped")
-
-    def _serve_conn(self, conn: socket.socket) -> None:
-        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        if self.banner_on_connect:
-            conn.sendall(f"\r\n{self.banner}\r\n".encode("ascii"))
-        while not self._stop.is_set():
-            r, _, _ = select.select([conn], [], [], 0.05)
-            if self._outbox:
-                try:
-                    conn.sendall(self.take_output())
-                except OSError:
-                    return
-            if not r:
-                continue
-            try:
-                data = conn.recv(4096)
-            except OSError:
-                return
-            if not data:
-                return
-            reply = self.handle(data)
-            if reply:
-                try:
-                    conn.sendall(reply)
-                except OSError:
-                    return

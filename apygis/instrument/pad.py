@@ -1,8 +1,14 @@
-"""Button pad files: which button code of the cursor means which button.
+"""The 27-button cursor pad: button names and codes, and pad files.
 
-The default pad is :data:`apygis.instrument.simulator.BUTTONS`. A cursor
-whose buttons send other codes is described by a pad file (UTF-8 text; one
-``CODE NAME`` pair per line, ``;`` starts a comment, blank lines ignored)::
+:data:`BUTTONS` is the default pad, code -> name: the single definition of
+the button names (their meanings are in ``docs/button-pad.md``; the
+simulator, the session and the CLI take them from here).
+:data:`BUTTON_CODES` and :func:`button_code` go from a name (or an alias)
+to its code.
+
+A cursor whose buttons send other codes is described by a pad file (UTF-8
+text; one ``CODE NAME`` pair per line, ``;`` starts a comment, blank lines
+ignored)::
 
     ; a 16-button puck: the digits on 1-10, then the functions we use most
     11 ENTER
@@ -21,10 +27,75 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from apygis.errors import FormatError
-from apygis.instrument.simulator import BUTTONS
+from apygis.errors import FormatError, ProtocolError
 
-__all__ = ["load_pad", "parse_pad"]
+__all__ = ["BUTTONS", "BUTTON_CODES", "button_code", "load_pad", "parse_pad"]
+
+#: The 27-button cursor pad: button code -> name (0 is "no button").
+#: Meanings in ``docs/button-pad.md``.
+BUTTONS: dict[int, str] = {
+    1: "1",
+    2: "2",
+    3: "3",
+    4: "4",
+    5: "5",
+    6: "6",
+    7: "7",
+    8: "8",
+    9: "9",
+    10: "0",
+    11: "ENTER",
+    12: "DELETE",
+    13: "PROCEED",
+    14: "DESCR",
+    15: "SEARCH",
+    16: "SAMPLE",
+    17: "LS",
+    18: "AREA",
+    19: "DHI",
+    20: "UP",
+    21: "DOWN",
+    22: "UNDO",
+    23: "POINT",
+    24: "PLUS",
+    25: "MINUS",
+    26: "SHUTTER",
+    27: "STEP",
+}
+
+#: Button name -> code, with a few aliases (``.``, ``+``, ``-``, long names).
+BUTTON_CODES: dict[str, int] = {name: code for code, name in BUTTONS.items()}
+BUTTON_CODES.update(
+    {
+        ".": 23,
+        "+": 24,
+        "-": 25,
+        "DESCRIPTIVES": 14,
+        "LINESPLIT": 17,
+    }
+)
+
+
+def button_code(name) -> int:
+    """The code (1-27) of a button name (``"ENTER"``, ``"5"``, ``"up"``), or of a code.
+
+    Examples
+    --------
+    >>> button_code("enter"), button_code("0"), button_code(24)
+    (11, 10, 24)
+    """
+    if isinstance(name, int) and not isinstance(name, bool):
+        if name in BUTTONS:
+            return name
+        raise ProtocolError(f"button code {name} is not on the pad (1-27)")
+    key = str(name).strip().upper()
+    try:
+        return BUTTON_CODES[key]
+    except KeyError:
+        raise ProtocolError(
+            f"unknown button {name!r}; the pad has: {', '.join(BUTTONS.values())}"
+        ) from None
+
 
 #: A button code: ASCII digits only (``str.isdigit`` also takes '²', which ``int`` refuses).
 _ASCII_DIGITS = re.compile(r"[0-9]+")

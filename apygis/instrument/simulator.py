@@ -22,7 +22,7 @@ text, one command a line, keywords in any case, ``#`` starts a comment
     move 120.5 80.25      # one report at (120.5, 80.25), no button
     glide 130 80.25 0.5   # reports at the rate along the straight line, over 0.5 s
     button ENTER          # press and release: a report with the code, one with 0
-    button 5              # the digit 5 (names in BUTTONS)
+    button 5              # the digit 5 (names in pad.BUTTONS)
     hold UP 0.3           # the button held for 0.3 s (reports at the rate), then released
     proximity out         # a report with the cursor lifted (``in`` to put it back)
     wait 0.2              # nothing for 0.2 s
@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from apygis.errors import FormatError, InstrumentError, ProtocolError
+from apygis.instrument.pad import BUTTON_CODES, BUTTONS, button_code
 from apygis.instrument.replay import Chunk
 from apygis.instrument.tablet import (
     PROTOCOLS,
@@ -95,73 +96,8 @@ MAX_TYPED = 1_000_000
 #: Largest script file :func:`read_script` reads, in bytes.
 MAX_SCRIPT_BYTES = 16 * 1024 * 1024
 
-#: The 27-button cursor pad: button code -> name (0 is "no button").
-#: Meanings in ``docs/button-pad.md``.
-BUTTONS: dict[int, str] = {
-    1: "1",
-    2: "2",
-    3: "3",
-    4: "4",
-    5: "5",
-    6: "6",
-    7: "7",
-    8: "8",
-    9: "9",
-    10: "0",
-    11: "ENTER",
-    12: "DELETE",
-    13: "PROCEED",
-    14: "DESCR",
-    15: "SEARCH",
-    16: "SAMPLE",
-    17: "LS",
-    18: "AREA",
-    19: "DHI",
-    20: "UP",
-    21: "DOWN",
-    22: "UNDO",
-    23: "POINT",
-    24: "PLUS",
-    25: "MINUS",
-    26: "SHUTTER",
-    27: "STEP",
-}
-
-#: Button name -> code, with a few aliases (``.``, ``+``, ``-``, long names).
-BUTTON_CODES: dict[str, int] = {name: code for code, name in BUTTONS.items()}
-BUTTON_CODES.update(
-    {
-        ".": 23,
-        "+": 24,
-        "-": 25,
-        "DESCRIPTIVES": 14,
-        "LINESPLIT": 17,
-    }
-)
-
 #: Named keyboard keys for the ``key`` command.
 KEYS: dict[str, str] = {"ENTER": "\r", "ESC": "\x1b", "BACKSPACE": "\x08", "TAB": "\t"}
-
-
-def button_code(name) -> int:
-    """The code (1-27) of a button name (``"ENTER"``, ``"5"``, ``"up"``), or of a code.
-
-    Examples
-    --------
-    >>> button_code("enter"), button_code("0"), button_code(24)
-    (11, 10, 24)
-    """
-    if isinstance(name, int) and not isinstance(name, bool):
-        if name in BUTTONS:
-            return name
-        raise ProtocolError(f"button code {name} is not on the pad (1-27)")
-    key = str(name).strip().upper()
-    try:
-        return BUTTON_CODES[key]
-    except KeyError:
-        raise ProtocolError(
-            f"unknown button {name!r}; the pad has: {', '.join(BUTTONS.values())}"
-        ) from None
 
 
 @dataclass(frozen=True, slots=True)

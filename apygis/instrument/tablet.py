@@ -116,7 +116,7 @@ class Report:
         Position in tablet counts (see :meth:`TabletConfig.counts_to_mm`).
     button : int or None
         Button code: 0 no button, 1-27 a button of the 27-button cursor
-        (names in :data:`apygis.instrument.simulator.BUTTONS`); None where a
+        (names in :data:`apygis.instrument.pad.BUTTONS`); None where a
         format carries no button state.
     proximity : bool
         True while the cursor is on the tablet (in proximity).

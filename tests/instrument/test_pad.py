@@ -2,14 +2,24 @@
 
 from __future__ import annotations
 
+import importlib
+
 import pytest
 
 from apygis.compile.engine import Press
-from apygis.compile.session import ReportDecoder
 from apygis.errors import FormatError
-from apygis.instrument.pad import load_pad, parse_pad
-from apygis.instrument.simulator import BUTTONS
+from apygis.instrument.pad import BUTTONS, load_pad, parse_pad
 from apygis.instrument.tablet import Report, TabletConfig
+
+
+def _report_decoder():
+    """The session's ReportDecoder, wherever the session package has it (it is moving)."""
+    for name in ("apygis.session", "apygis.session.decoder", "apygis.compile.session"):
+        try:
+            return importlib.import_module(name).ReportDecoder
+        except (ImportError, AttributeError):
+            continue
+    raise ImportError("no ReportDecoder in apygis.session or apygis.compile.session")
 
 
 def test_moved_buttons_leave_their_default_codes(tmp_path):
@@ -19,10 +29,15 @@ def test_moved_buttons_leave_their_default_codes(tmp_path):
     assert (pad[13], pad[11], pad[1]) == ("ENTER", "PROCEED", "1")
     assert list(pad.values()).count("ENTER") == 1
     assert len(parse_pad("5 ENTER\n", replace=True)) == 1
-    dec = ReportDecoder(TabletConfig(), pad)
-    assert dec.events(Report(10, 10, 13))[-1] == Press("ENTER")
+    dec = _report_decoder()(TabletConfig(), pad)
+    assert _presses(dec.events(Report(10, 10, 13))[-1:]) == ["ENTER"]
     assert dec.events(Report(10, 10, 0)) == []
-    assert dec.events(Report(10, 10, 11)) == [Press("PROCEED")]
+    assert _presses(dec.events(Report(10, 10, 11))) == ["PROCEED"]
+
+
+def _presses(events) -> list:
+    """The buttons of Press events (compared by name: the event classes are moving)."""
+    return [e.button if type(e).__name__ == Press.__name__ else e for e in events]
 
 
 @pytest.mark.parametrize(
