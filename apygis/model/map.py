@@ -431,10 +431,13 @@ class Layer:
         loses the point, not its continuity), unless they already reference
         each other otherwise: a ring of three becomes an open line of two, and
         a loop hanging on its own point (a branch end joined to a point of its
-        own line) keeps the link it has. Branches hanging on the point move to
-        the neighbour that took its place (backward first) if that has a free
-        side reference and does not already reference the branch end;
-        otherwise their end becomes a free line end.
+        own line) keeps the link it has. If the point is a branch end, its
+        neighbour along the branch takes its place at the junction (the branch
+        stays joined) unless it already references the junction. Branches
+        hanging on the point move to the neighbour that took its place
+        (backward first) if that has a free side reference and does not
+        already reference the branch end; otherwise their end becomes a free
+        line end.
         """
         t = self._tables["line_points"]
         lp = t.rows()
@@ -454,6 +457,14 @@ class Layer:
         elif mutual_b and mutual_f and not _linked(lp, bi, fi):
             lp["fwd"][bi] = f
             lp["back"][fi] = b
+        # A branch end: its neighbour along the branch takes its place at the junction.
+        for ref, nb, mutual, ji in (("back", fi, mutual_f, bi), ("fwd", bi, mutual_b, fi)):
+            if not mutual or ji is None or mutual_b == mutual_f or _linked(lp, nb, ji):
+                continue
+            side = next((s for s in ("side1", "side2") if lp[s][ji] == num), None)
+            if side is not None and lp[ref][nb] == NO_REF:
+                lp[ref][nb] = nums[ji]
+                lp[side][ji] = nums[nb]
         heir = bi if mutual_b else (fi if mutual_f else None)
         # Every other reference to the deleted point: branches and side links.
         for ref in REF_FIELDS:

@@ -375,3 +375,38 @@ def test_extend_line_with_no_points_still_needs_a_line_end():
     assert lay.extend_line(n[-1], []) == []
     with pytest.raises(TopologyError, match="not the end"):
         lay.extend_line(n[1], [])
+
+
+def test_delete_branch_end_keeps_the_branch_on_its_junction():
+    # The branch's first point was deleted and the rest of the branch floated free,
+    # a gap on the map; its neighbour now takes its place at the junction.
+    lay = apygis.MapFile("T").layer("h")
+    main = lay.add_line([(0, 0, 0), (10, 0, 0), (20, 0, 0)], code=31)
+    br = lay.add_line([(10, 5, 0), (10, 10, 0), (10, 15, 0)], code=32)
+    lay.join(br[0], main[1])
+    lay.delete_line_point(br[0])
+    assert refs(lay, br[1]) == (br[2], main[1], NO_REF, NO_REF)
+    assert refs(lay, main[1])[2:] == (br[1], NO_REF)
+    # the same at the last point of a branch that hangs on by its forward reference
+    tail = lay.add_line([(30, 5, 0), (25, 5, 0), (20, 1, 0)], code=32)
+    lay.join(tail[-1], main[2])
+    lay.delete_line_point(tail[-1])
+    assert refs(lay, tail[1]) == (main[2], tail[0], NO_REF, NO_REF)
+    assert refs(lay, main[2])[2:] == (tail[1], NO_REF)
+    assert lay.validate() == []
+    assert {(b["point"], b["junction"]) for b in lay.branches()} == {
+        (br[1], main[1]),
+        (tail[1], main[2]),
+    }
+
+
+def test_delete_branch_end_whose_neighbour_already_touches_the_junction():
+    # 2 -> 3 -> 4 -> 5, 5 hangs on 3: deleting 5 cannot hand its place to 4, which
+    # follows 3 already; 4 becomes a free end.
+    lay = apygis.MapFile("T").layer("r")
+    n = lay.add_line([(0, 0, 0), (1, 0, 0), (2, 0, 0), (2, 1, 0)], code=1)
+    lay.join(n[3], n[1])
+    lay.delete_line_point(n[3])
+    assert refs(lay, n[2]) == (NO_REF, n[1], NO_REF, NO_REF)
+    assert refs(lay, n[1]) == (n[2], n[0], NO_REF, NO_REF)
+    assert lay.validate() == []
