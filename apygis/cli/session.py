@@ -123,7 +123,6 @@ def session(
     from pathlib import Path
 
     from apygis.compile.oriented import OrientedGeometry
-    from apygis.compile.session import ReportDecoder, Session, SessionLock, run_tablet_stream
     from apygis.errors import (
         ApygisError,
         FileOverwriteError,
@@ -137,6 +136,7 @@ def session(
     from apygis.model.map import check_ext
     from apygis.model.symbols import load_library
     from apygis.orient.io import load_orientation
+    from apygis.session import ReportDecoder, Session, SessionLock, run_tablet_stream
 
     if sum(bool(x) for x in (tablet, replay, recover_only)) != 1:
         raise click.UsageError("give one of --tablet, --replay or --recover-only")
@@ -261,8 +261,8 @@ def _live(sess, port, url, parser, decoder, record, protocol, config):
     import sys
     import threading
 
-    from apygis.compile.session import run_live
     from apygis.instrument.replay import Recorder
+    from apygis.session import run_live
 
     rec = None
     if record:

@@ -1,33 +1,38 @@
 """The compilation engine: APY's COMPILATION program as a pure state machine.
 
-The engine takes **events** and returns **effects**; it does no I/O, so a
+The engine takes **events** and returns **effects** (both in
+:mod:`apygis.compile.events`, re-exported here); it does no I/O, so a
 session, a test and a replay drive it alike, and the same events always give
-the same map.
-
-Events
-    :class:`Mark` (the floating mark moved to a tablet position, mm),
-    :class:`Press` (one of the 27 cursor buttons, by name: ``"0"``-``"9"``,
-    ``"ENTER"``, ``"DELETE"``, ``"PROCEED"``, ``"DESCR"``, ``"SEARCH"``,
-    ``"SAMPLE"``, ``"LS"``, ``"AREA"``, ``"DHI"``, ``"UP"``, ``"DOWN"``,
-    ``"UNDO"``, ``"POINT"``, ...; see ``docs/button-pad.md``),
-    :class:`Keys` (text typed on the keyboard).
-Effects
-    :class:`Added` / :class:`Deleted` (records), :class:`Linked` (a line
-    end joined by SEARCH), :class:`Undone`,
-    :class:`Message` (for the operator's monitor), :class:`Status` (mode,
-    item, counts, mark), :class:`Plates` (motor positions for the four
-    correction plates), :class:`ZeroPlates` (eliminate parallax),
-    :class:`Save` (autosave after every 50 entries, on PROCEED, at the end),
-    :class:`Terminate`.
+the same map and the same engine state.
 
 An **entry** is an event that changes records (an ENTER that adds, a
-deletion, a split, an automatically sampled point, an UNDO). A session
-journals an entry before it acknowledges it (``apygis.compile.session``).
+deletion, a split, a SEARCH that joins, an automatically sampled point, an
+UNDO); it gives exactly one record effect (:data:`RECORD_EFFECTS`) per
+record change. A session journals an entry before it acknowledges it
+(:mod:`apygis.session.journal`).
 
-Modes follow the seed's COMPILATION section; the compilation menu is the
-start. DESCR then an item number and ENTER chooses 1 symbol, 2 line, 3 text;
-LS, AREA, DHI, DELETE and PROCEED are buttons of their own. Digits are
-collected and confirmed with ENTER; DELETE in a number entry clears it.
+States
+    The engine is in one :class:`Mode` at a time and holds that mode's own
+    state (:attr:`Engine.state`, an instance of ``MODE_STATE[mode]``:
+    :class:`SymbolPlace`, :class:`LineCode`, :class:`Line`, :class:`Text`,
+    :class:`AreaPick`, :class:`DhiPick`, :class:`DeletePlace`,
+    :class:`ProceedValue`, or :class:`Idle` for a mode that keeps nothing).
+    Only :meth:`Engine._enter` changes the mode, and it installs the new
+    mode's state with it, so a mode never sees another mode's leftovers.
+    What outlives modes belongs to the engine: the map and the layer compiled
+    into, the mark and its model height, the digits typed so far (``buf``),
+    the undo stack, the entry counters, the display settings
+    (:attr:`Engine.display_scale`, :attr:`Engine.crosshair_scale`) and the
+    fine/coarse height step and map/model view.
+
+Buttons
+    Digits and POINT collect a number that ENTER confirms; DELETE with
+    digits typed clears them. UP, DOWN, STEP, SHUTTER and UNDO act the same
+    in every mode. Every other button goes to the mode's handler
+    (:data:`Engine.HANDLERS`), which either acts or answers
+    :class:`Ignored` and changes nothing; which one, for every mode and
+    button, is the table of ``docs/compilation.md`` (a test holds the engine
+    to it). Once terminated, the engine ignores every button.
 
 Line mode
     First the decimal rounding down of the height read-out (0-2 decimals,
@@ -45,21 +50,61 @@ SAMPLE
     scale) around the track, the last mark position that was still inside it
     is entered as a point (or the mark itself if there was none), and the
     track becomes (B, new point). ENTER, SEARCH and PROCEED keep working.
+UNDO
+    Takes back the last entry: the layer as it was before it, the layer
+    compiled into, and the line in progress (first and last point, SAMPLE on
+    or off, the last sampled position inside the corridor); not the mode.
+    An UNDO outside line mode keeps the line progress it restores aside
+    (:attr:`Engine.line_aside`) until a PROCEED returns to the menu: the next
+    line mode starts with its SAMPLE setting, and an entry meanwhile records
+    it for a later UNDO. (This is how the journals of earlier versions
+    replay; see ``docs/compilation.md``.)
 
 Heights: UP/DOWN change the mark's model height by ``geometry.height_step_m``
 (ten times that after STEP, which toggles fine and coarse); recorded heights
 are ``geometry.correct_z`` (the dpZ correction) of it. SHUTTER toggles where
-the floating mark is seen (map or model); PLUS and MINUS are for symbol
-creation and do nothing here.
+the floating mark is seen (map or model).
+
+The PROCEED menu's items 1 and 3 set the display scale factor (0.25-25) and
+the crosshair scale (0.25-4): the engine keeps them and tells the display
+with :class:`DisplayScale` / :class:`CrosshairScale` effects.
 """
 
 from __future__ import annotations
 
+import enum
 import math
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
+from apygis.compile.events import (
+    CROSSHAIR_SCALE_RANGE,
+    DISPLAY_SCALE_RANGE,
+    RECORD_EFFECTS,
+    Added,
+    CrosshairScale,
+    Deleted,
+    DisplayScale,
+    Effect,
+    Event,
+    Ignored,
+    Keys,
+    Linked,
+    Mark,
+    Message,
+    Plates,
+    Press,
+    Save,
+    Status,
+    Terminate,
+    Undone,
+    ZeroPlates,
+    event_from_dict,
+    event_to_dict,
+)
 from apygis.compile.geometry import Geometry
 from apygis.errors import ApygisError, OrientationError
 from apygis.model import topology
@@ -67,13 +112,23 @@ from apygis.model.map import MapFile, check_ext
 from apygis.model.records import APY_CAPACITY
 
 __all__ = [
+    "GLOBAL_BUTTONS",
+    "MODE_BUTTONS",
+    "MODE_STATE",
+    "RECORD_EFFECTS",
     "Added",
+    "CrosshairScale",
     "Deleted",
+    "DisplayScale",
+    "Effect",
     "Engine",
+    "Event",
+    "Ignored",
     "Keys",
     "Linked",
     "Mark",
     "Message",
+    "Mode",
     "Plates",
     "Press",
     "Save",
@@ -86,7 +141,6 @@ __all__ = [
 ]
 
 DIGITS = frozenset("0123456789")
-ITEMS = {1: "symbol", 2: "line", 3: "text"}
 PROCEED_ITEMS = {
     1: "display scale factor",
     2: "eliminate parallax",
@@ -95,120 +149,175 @@ PROCEED_ITEMS = {
     5: "return to compilation",
     6: "change layer",
 }
+_DELETE_TABLES = {1: "symbols", 2: "line_points", 3: "texts"}
+
+#: Buttons that act the same in every mode but ``terminated`` (DELETE only while
+#: digits are typed: it clears them).
+GLOBAL_BUTTONS = (*sorted(DIGITS), "POINT", "UP", "DOWN", "STEP", "SHUTTER", "UNDO")
+#: Buttons whose meaning depends on the mode (DELETE with no digits typed).
+MODE_BUTTONS = (
+    "ENTER", "DELETE", "PROCEED", "DESCR", "SEARCH", "SAMPLE", "LS", "AREA", "DHI", "PLUS",
+    "MINUS",
+)  # fmt: skip
 
 
-# --------------------------------------------------------------------------- events
+class Mode(enum.StrEnum):
+    """The engine's modes (the value is the name the monitor shows)."""
+
+    MENU = "menu"
+    DESCR = "descr"
+    SYMBOL_CHOOSE = "symbol_choose"
+    SYMBOL_PLACE = "symbol_place"
+    LINE_ROUND = "line_round"
+    LINE_CODE = "line_code"
+    LINE = "line"
+    TEXT = "text"
+    SPLIT = "split"
+    AREA = "area"
+    DHI = "dhi"
+    DELETE_CHOOSE = "delete_choose"
+    DELETE_PLACE = "delete_place"
+    PROCEED = "proceed"
+    PROCEED_VALUE = "proceed_value"
+    LAYER_CHOOSE = "layer_choose"
+    TERMINATED = "terminated"
 
 
-@dataclass(frozen=True)
-class Mark:
-    """The floating mark is at tablet position (x_mm, y_mm)."""
-
-    x_mm: float
-    y_mm: float
+# --------------------------------------------------------------------------- mode states
 
 
-@dataclass(frozen=True)
-class Press:
-    """A cursor button was pressed."""
-
-    button: str
+@dataclass(slots=True)
+class Idle:
+    """The state of a mode that keeps nothing of its own."""
 
 
-@dataclass(frozen=True)
-class Keys:
-    """Text typed on the keyboard."""
+@dataclass(slots=True)
+class SymbolPlace:
+    """Placing symbols: the symbol code (00-99) chosen."""
 
-    text: str
-
-
-def event_to_dict(ev) -> dict:
-    """A JSON-ready form of an event (the session journal's records)."""
-    if isinstance(ev, Mark):
-        return {"mark": [ev.x_mm, ev.y_mm]}
-    if isinstance(ev, Press):
-        return {"press": ev.button}
-    return {"keys": ev.text}
+    code: int
 
 
-def event_from_dict(d: dict):
-    if "mark" in d:
-        x, y = d["mark"]
-        return Mark(float(x), float(y))
-    if "press" in d:
-        return Press(str(d["press"]))
-    if "keys" in d:
-        return Keys(str(d["keys"]))
-    raise ValueError(f"not an event: {d!r}")
+@dataclass(slots=True)
+class LineCode:
+    """Choosing the line code: the height rounding (0-2 decimals) already chosen."""
+
+    decimals: int
 
 
-# --------------------------------------------------------------------------- effects
+#: A line in progress as the undo stack records it: (first, end, sampling, last_inside).
+LineProgress = tuple[int | None, int | None, bool, tuple[float, float, float] | None]
+_NO_LINE: LineProgress = (None, None, False, None)
 
 
-@dataclass(frozen=True)
-class Added:
-    layer: str
+@dataclass(slots=True)
+class Line:
+    """Line mode.
+
+    ``code`` and ``decimals`` (height rounding) were chosen on the way in.
+    ``first`` / ``end``: the first and last point of the line in progress
+    (None before its first ENTER; ``first`` is None too while continuing a
+    line found by SEARCH). ``branch_from``: the junction SEARCH picked for
+    the next line's first point. ``sampling``: SAMPLE is on;
+    ``last_inside``: the last mark position inside the corridor.
+    """
+
+    code: int
+    decimals: int
+    first: int | None = None
+    end: int | None = None
+    branch_from: int | None = None
+    sampling: bool = False
+    last_inside: tuple[float, float, float] | None = None
+
+    def progress(self) -> LineProgress:
+        return (self.first, self.end, self.sampling, self.last_inside)
+
+    def restore(self, p: LineProgress) -> None:
+        self.first, self.end, self.sampling, self.last_inside = p
+
+    def reset(self) -> None:
+        """No line in progress (SAMPLE stays as it is)."""
+        self.first = self.end = self.branch_from = None
+        self.last_inside = None
+
+
+@dataclass(slots=True)
+class Text:
+    """Text mode: the text typed (None until typed)."""
+
+    text: str | None = None
+
+
+@dataclass(slots=True)
+class AreaPick:
+    """AREA: the line point of the first ENTER (None before it)."""
+
+    first: int | None = None
+
+
+@dataclass(slots=True)
+class DhiPick:
+    """DHI: the ground position (X, Y, Z) of the first ENTER (None before it)."""
+
+    first: tuple[float, float, float] | None = None
+
+
+@dataclass(slots=True)
+class DeletePlace:
+    """Deleting: the table ("symbols", "line_points" or "texts") chosen."""
+
     table: str
-    num: int
 
 
-@dataclass(frozen=True)
-class Deleted:
-    layer: str
-    table: str
-    num: int
+@dataclass(slots=True)
+class ProceedValue:
+    """PROCEED item 1 or 3: which, while its value is typed."""
+
+    item: int
 
 
-@dataclass(frozen=True)
-class Linked:
-    """Line point ``num`` was joined to ``target`` (``how``: "closed" or "branch")."""
+#: The state class each mode holds.
+MODE_STATE: dict[Mode, type] = {
+    Mode.MENU: Idle,
+    Mode.DESCR: Idle,
+    Mode.SYMBOL_CHOOSE: Idle,
+    Mode.SYMBOL_PLACE: SymbolPlace,
+    Mode.LINE_ROUND: Idle,
+    Mode.LINE_CODE: LineCode,
+    Mode.LINE: Line,
+    Mode.TEXT: Text,
+    Mode.SPLIT: Idle,
+    Mode.AREA: AreaPick,
+    Mode.DHI: DhiPick,
+    Mode.DELETE_CHOOSE: Idle,
+    Mode.DELETE_PLACE: DeletePlace,
+    Mode.PROCEED: Idle,
+    Mode.PROCEED_VALUE: ProceedValue,
+    Mode.LAYER_CHOOSE: Idle,
+    Mode.TERMINATED: Idle,
+}
 
-    layer: str
-    num: int
-    target: int
-    how: str
-
-
-@dataclass(frozen=True)
-class Undone:
-    layer: str
-
-
-@dataclass(frozen=True)
-class Message:
-    text: str
-
-
-@dataclass(frozen=True)
-class Status:
-    mode: str
-    layer: str
-    prompt: str
-    mark: tuple[float, float, float] | None
-    counts: dict = field(hash=False, compare=False, default_factory=dict)
-
-
-@dataclass(frozen=True)
-class Plates:
-    steps: tuple
-
-
-@dataclass(frozen=True)
-class ZeroPlates:
-    """Eliminate parallax: the plates' present position becomes their zero."""
-
-
-@dataclass(frozen=True)
-class Save:
-    reason: str
-
-
-@dataclass(frozen=True)
-class Terminate:
-    """The operator terminated compilation (PROCEED menu, item 4)."""
-
-
-RECORD_EFFECTS = (Added, Deleted, Linked, Undone)
+#: What each mode expects (the hint of an :class:`Ignored` answer).
+HINTS: dict[Mode, str] = {
+    Mode.MENU: "DESCR, LS, AREA, DHI, DELETE or PROCEED",
+    Mode.DESCR: "item 1 symbol, 2 line, 3 text, ENTER (PROCEED: menu)",
+    Mode.SYMBOL_CHOOSE: "symbol number, ENTER (PROCEED lists the symbols)",
+    Mode.SYMBOL_PLACE: "ENTER places the symbol, DELETE re-chooses, PROCEED: menu",
+    Mode.LINE_ROUND: "height rounding 0-2 decimals, ENTER (PROCEED: menu)",
+    Mode.LINE_CODE: "line code, ENTER (PROCEED: menu)",
+    Mode.LINE: "ENTER, SEARCH, SAMPLE or PROCEED",
+    Mode.TEXT: "type the text, ENTER places it (PROCEED: menu)",
+    Mode.SPLIT: "mark on a line side, ENTER (PROCEED: menu)",
+    Mode.AREA: "mark on a line point, ENTER (PROCEED: menu)",
+    Mode.DHI: "mark, ENTER (PROCEED: menu)",
+    Mode.DELETE_CHOOSE: "item 1 symbol, 2 line point, 3 text, ENTER (PROCEED: menu)",
+    Mode.DELETE_PLACE: "crosshairs on the record, ENTER (PROCEED: menu)",
+    Mode.PROCEED: "item 1-6, ENTER",
+    Mode.PROCEED_VALUE: "the value, ENTER",
+    Mode.LAYER_CHOOSE: "type the layer extension, ENTER",
+    Mode.TERMINATED: "compilation terminated",
+}
 
 
 # --------------------------------------------------------------------------- engine
@@ -264,38 +373,49 @@ class Engine:
         self.sample_tol_m = sample_tolerance_mm * scale / 1000.0
         self.autosave_every = autosave_every
         self.undo_depth = undo_depth
-        self.mode = "menu"
-        self.buf = ""
+        self.mode = Mode.MENU
+        self.state: object = Idle()
+        self.buf = ""  # the digits (or typed number) collected for the next ENTER
         self.mark_xy: tuple[float, float] | None = None
         self.z_model = float(start_z_m)
         self.entries = 0
         self.since_save = 0
         self.display_scale = 1.0
         self.crosshair_scale = 1.0
-        self.symbol_code: int | None = None
-        self.text: str | None = None
-        self.line_code = 0
-        self.decimals = 2
-        self.line_first: int | None = None
-        self.line_end: int | None = None
-        self.branch_from: int | None = None
-        self.sampling = False
-        self.last_inside: tuple[float, float, float] | None = None
-        self.first_pick: tuple | None = None
-        self.delete_kind: str | None = None
-        self.proceed_item: int | None = None
-        self.terminated = False
         self.coarse = False
         self.view = "map"
         self.plates_held = False  # the real-time loop refused the mark: the plates wait
+        #: The line progress an UNDO restored outside line mode (see the module docstring).
+        self.line_aside: LineProgress = _NO_LINE
         self._undo: list[tuple] = []
         self._snaps = 0  # snapshots taken: an edit that fails after its snapshot drops it
 
-    # ------------------------------------------------------------------ helpers
+    # ------------------------------------------------------------------ state
+
+    @property
+    def terminated(self) -> bool:
+        return self.mode is Mode.TERMINATED
 
     @property
     def layer(self):
         return self.map.layer(self.layer_ext)
+
+    def _enter(self, mode: Mode, state=None) -> None:
+        """Switch to ``mode`` with its own state (a fresh one if not given)."""
+        if state is None:
+            state = MODE_STATE[mode]()
+        elif type(state) is not MODE_STATE[mode]:
+            raise TypeError(f"mode {mode} holds a {MODE_STATE[mode].__name__}, not {state!r}")
+        self.mode, self.state = mode, state
+
+    def _line_progress(self) -> LineProgress:
+        return self.state.progress() if self.mode is Mode.LINE else self.line_aside
+
+    def _set_line_progress(self, p: LineProgress) -> None:
+        if self.mode is Mode.LINE:
+            self.state.restore(p)
+        else:
+            self.line_aside = p
 
     def mark(self) -> tuple[float, float, float] | None:
         """The mark in ground coordinates, height corrected (metres)."""
@@ -304,26 +424,21 @@ class Engine:
         X, Y = self.mark_xy
         return (X, Y, self.geometry.correct_z(X, Y, self.z_model))
 
-    def _line_z(self, z: float) -> float:
-        f = 10.0**self.decimals
-        return math.floor(round(z * f, 6)) / f
-
     def _status(self, prompt: str = "") -> Status:
         lay = self.layer
         counts = {t: len(lay.table(t)) for t in APY_CAPACITY}
         return Status(self.mode, self.layer_ext, prompt, self.mark(), counts)
 
     def _snapshot(self):
-        state = (self.line_first, self.line_end, self.sampling, self.last_inside)
-        self._undo.append((self.layer_ext, self.layer.copy(), state))
+        self._undo.append((self.layer_ext, self.layer.copy(), self._line_progress()))
         del self._undo[: -self.undo_depth]
         self._snaps += 1
 
     def _restore(self, snapshot) -> None:
-        ext, layer, state = snapshot
+        ext, layer, progress = snapshot
         self.map.add_layer(layer)
         self.layer_ext = ext
-        self.line_first, self.line_end, self.sampling, self.last_inside = state
+        self._set_line_progress(progress)
 
     def _entry(self, out: list) -> None:
         self.entries += 1
@@ -368,13 +483,25 @@ class Engine:
             return None
         return v
 
+    def _ignored(self, b: str, out: list) -> None:
+        out.append(Ignored(b, self.mode.value, HINTS[self.mode]))
+
     # ------------------------------------------------------------------ dispatch
 
-    def handle(self, event) -> list:
-        """Process one event; returns the effects, in order."""
+    def handle(self, event: Event) -> list[Effect]:
+        """Process one event; returns the effects, in order.
+
+        A press ends with a :class:`Status`; a mark gives :class:`Plates`
+        (and, sampling, entries); typed text ends with a :class:`Status`.
+        An edit the model refuses (an :class:`~apygis.errors.ApygisError`)
+        is taken back whole and told as a :class:`Message`.
+        """
         out: list = []
-        if self.terminated:
-            out.append(Message("compilation terminated"))
+        if self.mode is Mode.TERMINATED:
+            if isinstance(event, Press):
+                self._ignored(event.button, out)
+            else:
+                out.append(Message("compilation terminated"))
             return out
         if isinstance(event, Mark):
             self._on_mark(event, out)
@@ -384,7 +511,7 @@ class Engine:
             out.append(self._status())
             return out
         b = event.button
-        if b in ("UP", "DOWN"):
+        if b == "UP" or b == "DOWN":
             step = self.geometry.height_step_m * (10 if self.coarse else 1)
             self.z_model += step if b == "UP" else -step
             self._plates(out)
@@ -401,10 +528,9 @@ class Engine:
         elif b == "DELETE" and self.buf:
             self.buf = ""
         else:
-            handler = getattr(self, f"_mode_{self.mode}")
             snaps = self._snaps
             try:
-                handler(b, out)
+                self.HANDLERS[self.mode](self, b, out)
             except ApygisError as exc:  # an edit the model refused: tell, do not crash
                 if self._snaps != snaps:  # it had begun: take it back whole, keep no undo step
                     self._restore(self._undo.pop())
@@ -415,7 +541,7 @@ class Engine:
     def _on_mark(self, ev: Mark, out: list) -> None:
         self.mark_xy = self.geometry.ground(ev.x_mm, ev.y_mm)
         self._plates(out)
-        if self.mode == "line" and self.sampling:
+        if self.mode is Mode.LINE and self.state.sampling:
             self._sample(out)
 
     def _plates(self, out: list) -> None:
@@ -439,10 +565,10 @@ class Engine:
                 out.append(Plates(tuple(steps)))
 
     def _on_keys(self, text: str, out: list) -> None:
-        if self.mode == "text":
-            self.text = text
+        if self.mode is Mode.TEXT:
+            self.state.text = text
             out.append(Message(f"text {text!r}: place the mark and ENTER"))
-        elif self.mode in ("proceed_value", "layer_choose") or self.buf == "":
+        elif self.mode in (Mode.PROCEED_VALUE, Mode.LAYER_CHOOSE) or self.buf == "":
             self.buf = text.strip()
         else:
             out.append(Message("typed text is for text mode"))
@@ -456,28 +582,42 @@ class Engine:
         out.append(Message("last entry undone"))
         self._entry(out)
 
+    def _to_menu(self, out: list) -> None:
+        """PROCEED back to the menu: no line in progress (SAMPLE off), and a save."""
+        self._enter(Mode.MENU)
+        self.line_aside = _NO_LINE
+        self.since_save = 0
+        out.append(Save("proceed"))
+
+    def _proceed_to_menu(self, b: str, out: list) -> bool:
+        """PROCEED in a mode whose PROCEED returns to the menu; True if ``b`` was it."""
+        if b == "PROCEED":
+            self._to_menu(out)
+            return True
+        return False
+
     # ------------------------------------------------------------------ menu
 
     def _mode_menu(self, b: str, out: list) -> None:
         if b == "DESCR":
-            self.mode = "descr"
+            self._enter(Mode.DESCR)
             out.append(Message("item: 1 symbol, 2 line, 3 text; ENTER"))
         elif b == "LS":
-            self.mode = "split"
+            self._enter(Mode.SPLIT)
             out.append(Message("LS: place the mark on a line side, ENTER"))
         elif b == "AREA":
-            self.mode, self.first_pick = "area", None
+            self._enter(Mode.AREA)
             out.append(Message("AREA: first point of the line, ENTER (clockwise)"))
         elif b == "DHI":
-            self.mode, self.first_pick = "dhi", None
+            self._enter(Mode.DHI)
             out.append(Message("DHI: first point, ENTER"))
         elif b == "DELETE":
-            self.mode = "delete_choose"
+            self._enter(Mode.DELETE_CHOOSE)
             out.append(Message("DELETE: item 1 symbol, 2 line point, 3 text; ENTER"))
         elif b == "PROCEED":
             self._enter_proceed(out)
         else:
-            out.append(Message(f"{b}: not in the compilation menu"))
+            self._ignored(b, out)
 
     def _mode_descr(self, b: str, out: list) -> None:
         if b == "ENTER":
@@ -485,18 +625,18 @@ class Engine:
             if item is None:
                 return
             if item == 1:
-                self.mode = "symbol_choose"
+                self._enter(Mode.SYMBOL_CHOOSE)
                 out.append(Message("symbol number, ENTER (PROCEED lists the symbols)"))
             elif item == 2:
-                self.mode = "line_round"
+                self._enter(Mode.LINE_ROUND)
                 out.append(Message("height rounding: decimals 0-2, ENTER"))
             else:
-                self.mode, self.text = "text", None
+                self._enter(Mode.TEXT)
                 out.append(Message("type the text, place the mark, ENTER"))
         elif b == "PROCEED":
-            self.mode = "menu"
+            self._enter(Mode.MENU)  # nothing was entered: no save
         else:
-            out.append(Message(f"{b}: choose an item number"))
+            self._ignored(b, out)
 
     # ------------------------------------------------------------------ symbols
 
@@ -512,8 +652,7 @@ class Engine:
         if b == "ENTER":
             code = self._take_number(out, 0, 99, "symbol")
             if code is not None:
-                self.symbol_code = code
-                self.mode = "symbol_place"
+                self._enter(Mode.SYMBOL_PLACE, SymbolPlace(code))
                 out.append(Message(f"symbol {code:02d} {self._symbol_name(code)}".rstrip()))
         elif b == "PROCEED":
             if self.library is None:
@@ -522,7 +661,7 @@ class Engine:
                 names = [f"{c:02d} {s.name}" for c, s in self.library.items() if not s.is_free]
                 out.append(Message("symbols: " + ", ".join(names)))
         else:
-            out.append(Message(f"{b}: choose a symbol number"))
+            self._ignored(b, out)
 
     def _mode_symbol_place(self, b: str, out: list) -> None:
         if b == "ENTER":
@@ -530,71 +669,68 @@ class Engine:
                 return
             self._snapshot()
             X, Y, Z = self.mark()
-            num = self.layer.add_symbol(X, Y, Z, self.symbol_code)
+            num = self.layer.add_symbol(X, Y, Z, self.state.code)
             out.append(Added(self.layer_ext, "symbols", num))
             self._entry(out)
         elif b == "DELETE":
-            self.mode = "symbol_choose"
+            self._enter(Mode.SYMBOL_CHOOSE)
             out.append(Message("symbol number, ENTER"))
-        elif b == "PROCEED":
-            self._to_menu(out)
-        else:
-            out.append(Message(f"{b}: ENTER places symbol {self.symbol_code:02d}"))
+        elif not self._proceed_to_menu(b, out):
+            self._ignored(b, out)
 
     # ------------------------------------------------------------------ lines
 
     def _mode_line_round(self, b: str, out: list) -> None:
         if b == "ENTER":
             if self.buf == "":
-                self.decimals = 2
+                decimals = 2
             else:
-                d = self._take_number(out, 0, 2, "decimals")
-                if d is None:
+                decimals = self._take_number(out, 0, 2, "decimals")
+                if decimals is None:
                     return
-                self.decimals = d
             self.buf = ""
-            self.mode = "line_code"
-            out.append(
-                Message(f"heights rounded down to {self.decimals} decimals; line code, ENTER")
-            )
-        elif b == "PROCEED":
-            self._to_menu(out)
+            self._enter(Mode.LINE_CODE, LineCode(decimals))
+            out.append(Message(f"heights rounded down to {decimals} decimals; line code, ENTER"))
+        elif not self._proceed_to_menu(b, out):
+            self._ignored(b, out)
 
     def _mode_line_code(self, b: str, out: list) -> None:
         if b == "ENTER":
             code = self._take_number(out, 0, 99, "line code")
             if code is not None:
-                self.line_code = code
-                self.mode = "line"
-                self._reset_line()
+                sampling = self.line_aside[2]
+                self.line_aside = _NO_LINE
+                self._enter(Mode.LINE, Line(code, self.state.decimals, sampling=sampling))
                 out.append(Message(f"line code {code:02d}: ENTER points, SEARCH, SAMPLE, PROCEED"))
-        elif b == "PROCEED":
-            self._to_menu(out)
+        elif not self._proceed_to_menu(b, out):
+            self._ignored(b, out)
 
-    def _reset_line(self) -> None:
-        self.line_first = self.line_end = self.branch_from = None
-        self.last_inside = None
+    def _line_z(self, z: float) -> float:
+        f = 10.0**self.state.decimals
+        return math.floor(round(z * f, 6)) / f
 
     def _add_point(self, xyz, out: list) -> int | None:
+        line: Line = self.state
         if not self._capacity_ok("line_points", out):
             return None
         X, Y, Z = xyz
         Z = self._line_z(Z)
-        if self.line_end is None:
-            (num,) = self.layer.add_line([(X, Y, Z)], self.line_code)
-            self.line_first = num
-            if self.branch_from is not None:  # SEARCH picked a junction before this point
-                self.layer.join(num, self.branch_from)
-                self.branch_from = None
+        if line.end is None:
+            (num,) = self.layer.add_line([(X, Y, Z)], line.code)
+            line.first = num
+            if line.branch_from is not None:  # SEARCH picked a junction before this point
+                self.layer.join(num, line.branch_from)
+                line.branch_from = None
         else:
-            (num,) = self.layer.extend_line(self.line_end, [(X, Y, Z)])
-        self.line_end = num
-        self.last_inside = None
+            (num,) = self.layer.extend_line(line.end, [(X, Y, Z)])
+        line.end = num
+        line.last_inside = None
         out.append(Added(self.layer_ext, "line_points", num))
         self._entry(out)
         return num
 
     def _mode_line(self, b: str, out: list) -> None:
+        line: Line = self.state
         if b == "ENTER":
             if self._need_mark(out) and self._capacity_ok("line_points", out):
                 self._snapshot()
@@ -602,48 +738,50 @@ class Engine:
         elif b == "SEARCH":
             self._search(out)
         elif b == "SAMPLE":
-            self.sampling = not self.sampling
-            self.last_inside = None
-            out.append(Message(f"sampling {'on' if self.sampling else 'off'}"))
+            line.sampling = not line.sampling
+            line.last_inside = None
+            out.append(Message(f"sampling {'on' if line.sampling else 'off'}"))
         elif b == "PROCEED":
-            if self.line_end is not None:
-                self._reset_line()
+            if line.end is not None:
+                line.reset()
                 out.append(Message("line left open; ENTER starts a new line, PROCEED: menu"))
             else:
                 self._to_menu(out)
         else:
-            out.append(Message(f"{b}: not in line mode"))
+            self._ignored(b, out)
 
     def _search(self, out: list) -> None:
+        line: Line = self.state
         hit = self._nearest("line_points")
         if hit is None:
             out.append(Message(f"SEARCH: no line point within {self.snap_m:.2f} m"))
             return
         lp = self.layer.line_points
         target = int(lp["num"][hit[0]])
-        if self.line_end is None:
+        if line.end is None:
             if lp["fwd"][hit[0]] == -1:  # a line end: continue that line
-                self.line_first, self.line_end = None, target
+                line.first, line.end = None, target
                 out.append(Message(f"SEARCH: continuing the line at point {target}"))
             else:  # a junction: the next ENTER starts a branch of it
-                self.branch_from = target
+                line.branch_from = target
                 out.append(Message(f"SEARCH: a branch starts at point {target}; ENTER its points"))
             return
-        if target == self.line_end:
+        if target == line.end:
             out.append(Message("SEARCH: that is the line's last point"))
             return
         self._snapshot()
-        how = self.layer.join(self.line_end, target)
-        out.append(Linked(self.layer_ext, self.line_end, target, how))
+        how = self.layer.join(line.end, target)
+        out.append(Linked(self.layer_ext, line.end, target, how))
         out.append(Message(f"SEARCH: line {'closed' if how == 'closed' else 'joined'} at {target}"))
         self._entry(out)
-        self._reset_line()
+        line.reset()
 
     def _sample(self, out: list) -> None:
-        if self.line_end is None:
+        line: Line = self.state
+        if line.end is None:
             return
         lp = self.layer.line_points
-        row_b = lp[lp["num"] == self.line_end][0]
+        row_b = lp[lp["num"] == line.end][0]
         back = int(row_b["back"])
         if back == -1 or not (lp["num"] == back).any():
             return
@@ -655,9 +793,9 @@ class Engine:
             return
         across = abs((bx - ax) * (my - ay) - (by - ay) * (mx - ax)) / length
         if across <= self.sample_tol_m:
-            self.last_inside = (mx, my, mz)
+            line.last_inside = (mx, my, mz)
             return
-        point = self.last_inside or (mx, my, mz)
+        point = line.last_inside or (mx, my, mz)
         if not self._capacity_ok("line_points", out):
             return
         self._snapshot()
@@ -669,18 +807,19 @@ class Engine:
 
     def _mode_text(self, b: str, out: list) -> None:
         if b == "ENTER":
-            if self.text is None:
+            text = self.state.text
+            if text is None:
                 out.append(Message("type the text first"))
                 return
             if not (self._need_mark(out) and self._capacity_ok("texts", out)):
                 return
             self._snapshot()
             X, Y, Z = self.mark()
-            num = self.layer.add_text(X, Y, Z, self.text)
+            num = self.layer.add_text(X, Y, Z, text)
             out.append(Added(self.layer_ext, "texts", num))
             self._entry(out)
-        elif b == "PROCEED":
-            self._to_menu(out)
+        elif not self._proceed_to_menu(b, out):
+            self._ignored(b, out)
 
     # ------------------------------------------------------------------ LS, AREA, DHI
 
@@ -699,8 +838,8 @@ class Engine:
             out.append(Added(self.layer_ext, "line_points", num))
             out.append(Message(f"LS: point {num} between {a} and {b2}"))
             self._entry(out)
-        elif b == "PROCEED":
-            self._to_menu(out)
+        elif not self._proceed_to_menu(b, out):
+            self._ignored(b, out)
 
     def _nearest_segment(self):
         lp = self.layer.line_points
@@ -723,17 +862,17 @@ class Engine:
 
     def _mode_area(self, b: str, out: list) -> None:
         if b == "ENTER":
+            pick: AreaPick = self.state
             hit = self._nearest("line_points")
             if hit is None:
                 out.append(Message(f"AREA: no line point within {self.snap_m:.2f} m"))
                 return
             num = int(self.layer.line_points["num"][hit[0]])
-            if self.first_pick is None:
-                self.first_pick = (num,)
+            if pick.first is None:
+                pick.first = num
                 out.append(Message(f"AREA: point {num}; next point clockwise, ENTER"))
                 return
-            first = self.first_pick[0]
-            self.first_pick = None
+            first, pick.first = pick.first, None
             try:
                 r = self.layer.area(first, num)
             except ApygisError as exc:
@@ -746,19 +885,20 @@ class Engine:
                     f"{r.perimeter_m:.2f} m, {len(r.points)} points, walked {sense}"
                 )
             )
-        elif b == "PROCEED":
-            self._to_menu(out)
+        elif not self._proceed_to_menu(b, out):
+            self._ignored(b, out)
 
     def _mode_dhi(self, b: str, out: list) -> None:
         if b == "ENTER":
+            pick: DhiPick = self.state
             if not self._need_mark(out):
                 return
-            if self.first_pick is None:
-                self.first_pick = self.mark()
+            if pick.first is None:
+                pick.first = self.mark()
                 out.append(Message("DHI: second point, ENTER"))
                 return
-            d = self.layer.dhi(self.first_pick, self.mark())
-            self.first_pick = None
+            d = self.layer.dhi(pick.first, self.mark())
+            pick.first = None
             pct = "vertical" if d.inclination_pct is None else f"{d.inclination_pct:.2f} %"
             out.append(
                 Message(
@@ -766,8 +906,8 @@ class Engine:
                     f"inclination {d.inclination_deg:+.3f} deg ({pct})"
                 )
             )
-        elif b == "PROCEED":
-            self._to_menu(out)
+        elif not self._proceed_to_menu(b, out):
+            self._ignored(b, out)
 
     # ------------------------------------------------------------------ delete
 
@@ -775,42 +915,35 @@ class Engine:
         if b == "ENTER":
             item = self._take_number(out, 1, 3, "item")
             if item is not None:
-                self.delete_kind = {1: "symbols", 2: "line_points", 3: "texts"}[item]
-                self.mode = "delete_place"
+                self._enter(Mode.DELETE_PLACE, DeletePlace(_DELETE_TABLES[item]))
                 out.append(Message("place the crosshairs on it, ENTER"))
-        elif b == "PROCEED":
-            self._to_menu(out)
+        elif not self._proceed_to_menu(b, out):
+            self._ignored(b, out)
 
     def _mode_delete_place(self, b: str, out: list) -> None:
         if b == "ENTER":
-            hit = self._nearest(self.delete_kind)
+            table = self.state.table
+            hit = self._nearest(table)
             if hit is None:
                 out.append(Message(f"DELETE: nothing within {self.snap_m:.2f} m"))
                 return
-            num = int(self.layer.table(self.delete_kind)["num"][hit[0]])
+            num = int(self.layer.table(table)["num"][hit[0]])
             self._snapshot()
-            if self.delete_kind == "symbols":
+            if table == "symbols":
                 self.layer.delete_symbol(num)
-            elif self.delete_kind == "texts":
+            elif table == "texts":
                 self.layer.delete_text(num)
             else:
                 self.layer.delete_line_point(num)
-            out.append(Deleted(self.layer_ext, self.delete_kind, num))
+            out.append(Deleted(self.layer_ext, table, num))
             self._entry(out)
-        elif b == "PROCEED":
-            self._to_menu(out)
+        elif not self._proceed_to_menu(b, out):
+            self._ignored(b, out)
 
     # ------------------------------------------------------------------ PROCEED menu
 
-    def _to_menu(self, out: list) -> None:
-        self.mode = "menu"
-        self._reset_line()
-        self.sampling = False
-        self.since_save = 0
-        out.append(Save("proceed"))
-
     def _enter_proceed(self, out: list) -> None:
-        self.mode = "proceed"
+        self._enter(Mode.PROCEED)
         lines = []
         for ext in sorted(self.map.layers):
             c = self.map.layers[ext].counts()
@@ -827,50 +960,53 @@ class Engine:
 
     def _mode_proceed(self, b: str, out: list) -> None:
         if b != "ENTER":
-            out.append(Message(f"{b}: choose 1-6 and ENTER"))
+            self._ignored(b, out)
             return
         item = self._take_number(out, 1, 6, "PROCEED item")
         if item is None:
             return
         if item in (1, 3):
-            self.proceed_item = item
-            self.mode = "proceed_value"
-            rng = "0.25-25" if item == 1 else "0.25-4"
-            out.append(Message(f"{PROCEED_ITEMS[item]} ({rng}), ENTER"))
+            self._enter(Mode.PROCEED_VALUE, ProceedValue(item))
+            lo, hi = DISPLAY_SCALE_RANGE if item == 1 else CROSSHAIR_SCALE_RANGE
+            out.append(Message(f"{PROCEED_ITEMS[item]} ({lo:g}-{hi:g}), ENTER"))
         elif item == 2:
             out.append(ZeroPlates())
             out.append(Message("parallax eliminated: correction plates re-zeroed"))
         elif item == 4:
-            self.terminated = True
+            self._enter(Mode.TERMINATED)
             out.append(Save("terminate"))
             out.append(Terminate())
         elif item == 5:
-            self.mode = "menu"
+            self._enter(Mode.MENU)
         else:
-            self.mode = "layer_choose"
+            self._enter(Mode.LAYER_CHOOSE)
             out.append(Message("layer extension (type it), ENTER"))
 
     def _mode_proceed_value(self, b: str, out: list) -> None:
         if b != "ENTER":
+            self._ignored(b, out)
             return
         try:
             v = float(self.buf)
         except ValueError:
             v = float("nan")
         self.buf = ""
-        lo, hi = (0.25, 25.0) if self.proceed_item == 1 else (0.25, 4.0)
+        item = self.state.item
+        lo, hi = DISPLAY_SCALE_RANGE if item == 1 else CROSSHAIR_SCALE_RANGE
         if not lo <= v <= hi:
             out.append(Message(f"a value from {lo} to {hi}, please"))
             return
-        if self.proceed_item == 1:
+        if item == 1:
             self.display_scale = v
+            out.append(DisplayScale(v))
         else:
             self.crosshair_scale = v
-        out.append(Message(f"{PROCEED_ITEMS[self.proceed_item]} {v:g}"))
-        self.mode = "proceed"
+            out.append(CrosshairScale(v))
+        self._enter(Mode.PROCEED)
 
     def _mode_layer_choose(self, b: str, out: list) -> None:
         if b != "ENTER":
+            self._ignored(b, out)
             return
         ext, self.buf = self.buf, ""
         try:
@@ -880,4 +1016,28 @@ class Engine:
             return
         self.map.layer(self.layer_ext)
         out.append(Message(f"compiling into {self.map.id}.{self.layer_ext}"))
-        self.mode = "menu"
+        self._enter(Mode.MENU)
+
+    def _mode_terminated(self, b: str, out: list) -> None:
+        self._ignored(b, out)
+
+    #: The handler of each mode: ``handler(engine, button, effects)``.
+    HANDLERS: ClassVar[dict[Mode, Callable[[Engine, str, list], None]]] = {
+        Mode.MENU: _mode_menu,
+        Mode.DESCR: _mode_descr,
+        Mode.SYMBOL_CHOOSE: _mode_symbol_choose,
+        Mode.SYMBOL_PLACE: _mode_symbol_place,
+        Mode.LINE_ROUND: _mode_line_round,
+        Mode.LINE_CODE: _mode_line_code,
+        Mode.LINE: _mode_line,
+        Mode.TEXT: _mode_text,
+        Mode.SPLIT: _mode_split,
+        Mode.AREA: _mode_area,
+        Mode.DHI: _mode_dhi,
+        Mode.DELETE_CHOOSE: _mode_delete_choose,
+        Mode.DELETE_PLACE: _mode_delete_place,
+        Mode.PROCEED: _mode_proceed,
+        Mode.PROCEED_VALUE: _mode_proceed_value,
+        Mode.LAYER_CHOOSE: _mode_layer_choose,
+        Mode.TERMINATED: _mode_terminated,
+    }

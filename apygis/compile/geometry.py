@@ -17,7 +17,7 @@ and ``height_step_m``, the height change of one UP/DOWN press, which follows
 the plate-step resolution.
 
 :class:`PlaneGeometry` is the map-only case (a conformal tablet transform,
-no photos). ``apygis.compile.session`` builds an oriented one from an
+no photos). :mod:`apygis.compile.oriented` builds an oriented one from an
 orientation file.
 """
 

@@ -40,7 +40,7 @@ import os
 import re
 from pathlib import Path
 
-from apygis.compile.engine import Keys, Mark, Press
+from apygis.compile.events import Keys, Mark, Press, event_to_dict
 from apygis.errors import ApygisError, FormatError
 
 __all__ = [
@@ -468,8 +468,6 @@ class Journal:
 
     def append(self, event, sync: bool) -> None:
         """Write one event; with ``sync`` the file is on disk when this returns."""
-        from apygis.compile.engine import event_to_dict
-
         self._write(event_to_dict(event))
         self.events += 1
         if sync:

@@ -1,11 +1,13 @@
 """A map-revision session: the engine, the instrument, the journal and the files.
 
 :class:`Session` wires the parts: tablet reports become engine events
-(:class:`ReportDecoder`), every event is journaled (an entry is on disk
-before it is acknowledged: see :mod:`apygis.compile.journal`), plate
-positions go to the motor controller, and the layer files are saved,
-atomically, after every 50 entries, on PROCEED and at the end, with the
-margin file (the line points lacking a forward or backward reference).
+(:class:`~apygis.session.decoder.ReportDecoder`), every event is journaled
+(an entry is on disk before it is acknowledged: see
+:mod:`apygis.session.journal`), plate positions go to the motor controller,
+the display settings are kept for a display (:attr:`Session.display`), and
+the layer files are saved, atomically, after every 50 entries, on PROCEED
+and at the end, with the margin file (the line points lacking a forward or
+backward reference).
 
 Files of a session on the map ``dir/ID``:
 
@@ -13,9 +15,10 @@ Files of a session on the map ``dir/ID``:
 * ``dir/ID.journal``: the journal, removed when the session terminates
   cleanly; a session started on a map with a journal recovers it first, if
   the layer files are still in a state the journal knows
-  (:func:`~apygis.compile.journal.check_files`);
-* ``dir/ID.lock``: the session's lock (:class:`SessionLock`): one session
-  per map, taken before anything is read, removed at the end;
+  (:func:`~apygis.session.journal.check_files`);
+* ``dir/ID.lock``: the session's lock
+  (:class:`~apygis.session.lock.SessionLock`): one session per map, taken
+  before anything is read, removed at the end;
 * ``dir/ID-margin.apa``: the margin file (APY ASCII), written at the end.
 
 A failed save (a full disk) does not end the session: the operator is told,
@@ -31,12 +34,16 @@ from __future__ import annotations
 import contextlib
 import logging
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
-from apygis.compile.engine import (
+from apygis.compile.engine import Engine
+from apygis.compile.events import (
     RECORD_EFFECTS,
     Added,
-    Engine,
+    CrosshairScale,
+    DisplayScale,
+    Ignored,
     Keys,
     Linked,
     Mark,
@@ -49,7 +56,12 @@ from apygis.compile.engine import (
     Undone,
     ZeroPlates,
 )
-from apygis.compile.journal import (
+from apygis.errors import ApygisError, OrientationError
+from apygis.instrument.simulator import BUTTONS
+from apygis.model.map import MapFile
+from apygis.model.topology import margin_mask
+from apygis.session.decoder import ReportDecoder, decode_typed
+from apygis.session.journal import (
     MAX_KEYS,
     MAX_MARK_MM,
     Journal,
@@ -61,19 +73,12 @@ from apygis.compile.journal import (
     read_journal,
     upgrade_journal,
 )
-from apygis.errors import ApygisError, OrientationError
-from apygis.instrument.simulator import BUTTONS
-from apygis.model.map import MapFile
-from apygis.model.topology import margin_mask
+from apygis.session.lock import SessionLock
 
 __all__ = [
-    "ReportDecoder",
+    "DisplayState",
     "SaveError",
     "Session",
-    "SessionLock",
-    "SessionLockError",
-    "SessionLockedError",
-    "decode_typed",
     "margin_map",
     "run_live",
     "run_tablet_stream",
@@ -85,40 +90,23 @@ _WORD = {"symbols": "symbol", "line_points": "line point", "texts": "text"}
 _BUTTON_NAMES = frozenset(BUTTONS.values())
 
 
-class ReportDecoder:
-    """Tablet reports -> engine events.
+@dataclass
+class DisplayState:
+    """What a display of the session draws with: the PROCEED menu's settings.
 
-    A report in proximity whose position differs from the last one is a
-    :class:`~apygis.compile.engine.Mark` (tablet millimetres). A **press** is a
-    report whose button code is not 0 and differs from the previous report's;
-    UP and DOWN also act on every report while held. A report out of
-    proximity (the cursor lifted) moves nothing and presses nothing.
+    ``scale`` is the graphic display's scale factor (0.25-25, PROCEED item
+    1), ``crosshair`` the crosshair scale (0.25-4, item 3); both start at 1.
+    The session keeps them from the engine's :class:`DisplayScale` and
+    :class:`CrosshairScale` effects, also while it replays a journal, so a
+    recovered session shows what the operator had set.
     """
 
-    def __init__(self, config, buttons: dict[int, str], repeat=("UP", "DOWN")):
-        self.config = config
-        self.buttons = buttons
-        self.repeat = frozenset(repeat)
-        self._prev_button = 0
-        self._prev_xy = None
+    scale: float = 1.0
+    crosshair: float = 1.0
 
-    def events(self, report) -> list:
-        out = []
-        if not report.proximity:
-            self._prev_button = 0
-            return out
-        if (report.x_counts, report.y_counts) != self._prev_xy:
-            self._prev_xy = (report.x_counts, report.y_counts)
-            out.append(Mark(*self.config.report_mm(report)))
-        b = report.button or 0
-        if b and (b != self._prev_button or self.buttons.get(b) in self.repeat):
-            name = self.buttons.get(b)
-            if name is None:
-                log.warning("tablet button code %d is not on the pad; ignored", b)
-            else:
-                out.append(Press(name))
-        self._prev_button = b
-        return out
+
+class SaveError(ApygisError, OSError):
+    """The layer files could not be saved at the end; the journal keeps every entry."""
 
 
 def margin_map(m: MapFile) -> MapFile:
@@ -130,144 +118,6 @@ def margin_map(m: MapFile) -> MapFile:
         lp = lay.line_points
         out.add_layer(Layer.from_arrays(ext, line_points=lp[margin_mask(lp)]))
     return out
-
-
-class SessionLockedError(ApygisError, BlockingIOError):
-    """Another session holds the map (its lock file names the process)."""
-
-
-class SaveError(ApygisError, OSError):
-    """The layer files could not be saved at the end; the journal keeps every entry."""
-
-
-class SessionLockError(ApygisError, OSError):
-    """The session lock file cannot be created."""
-
-
-class SessionLock:
-    """An exclusive lock on a map for one session: ``dir/ID.lock``.
-
-    An OS file lock (``flock``) on the lock file, so the kernel releases it
-    when the holding process ends, however it ends (``kill -9`` included):
-    a lock file left behind by a dead process does not block. The holder
-    writes its pid, host and start time into the file for the message a
-    second session gets. :meth:`release` removes the file.
-    """
-
-    def __init__(self, path: Path, fd: int):
-        self.path = path
-        self._fd: int | None = fd
-
-    @classmethod
-    def acquire(cls, base) -> SessionLock:
-        """Lock the map ``base`` (``dir/ID``), or raise :class:`SessionLockedError`."""
-        import datetime
-        import fcntl
-        import json
-        import os
-        import socket
-
-        base = Path(base)
-        path = base.with_name(base.name + ".lock")
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise SessionLockError(f"{path.parent}: cannot create the folder: {exc}") from None
-        for _ in range(100):
-            try:
-                fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
-            except OSError as exc:
-                raise SessionLockError(
-                    f"{path}: cannot create the session lock file: {exc.strerror or exc}"
-                ) from None
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                holder = _lock_holder(fd)
-                os.close(fd)
-                raise SessionLockedError(
-                    f"{base}: the map is in use by another session ({holder}; lock file "
-                    f"{path}); wait for it to end, or end it"
-                ) from None
-            try:  # the file we locked may have been removed by a releasing holder: retry
-                same = os.stat(path).st_ino == os.fstat(fd).st_ino
-            except FileNotFoundError:
-                same = False
-            if not same:
-                os.close(fd)
-                continue
-            info = {
-                "pid": os.getpid(),
-                "host": socket.gethostname(),
-                "started": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-            }
-            try:
-                os.ftruncate(fd, 0)
-                os.pwrite(fd, (json.dumps(info) + "\n").encode("utf-8"), 0)
-            except OSError:
-                pass  # the lock holds without the note
-            return cls(path, fd)
-        raise SessionLockError(f"{path}: cannot take the session lock (the file keeps changing)")
-
-    @property
-    def held(self) -> bool:
-        return self._fd is not None
-
-    def release(self) -> None:
-        """Remove the lock file and release the lock (idempotent)."""
-        import contextlib
-        import os
-
-        if self._fd is None:
-            return
-        fd, self._fd = self._fd, None
-        with contextlib.suppress(OSError):
-            os.unlink(self.path)  # still holding it: nobody can lock this file meanwhile
-        os.close(fd)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.release()
-
-
-def _lock_holder(fd: int) -> str:
-    import json
-    import os
-
-    try:
-        info = json.loads(os.pread(fd, 4096, 0).decode("utf-8"))
-        return f"pid {int(info['pid'])} on {info['host']}, started {info['started']}"
-    except (OSError, ValueError, KeyError, TypeError):
-        return "a process that has not yet written its pid"
-
-
-def decode_typed(raw) -> tuple[str, str | None]:
-    """A typed line as text, and a note for the operator when it was not clean UTF-8.
-
-    ``raw`` is bytes from the keyboard (or a str that may carry
-    ``surrogateescape`` characters, as ``sys.stdin`` gives on a Latin-1
-    terminal). Bytes that are not UTF-8 are read as Latin-1 (the usual
-    8-bit terminal encoding: ``b"M\\xfcller"`` is ``"Müller"``) and the note
-    says so.
-
-    >>> decode_typed(b"M\\xfcller")[0], decode_typed("Kirchweg")
-    ('Müller', ('Kirchweg', None))
-    """
-    if isinstance(raw, str):
-        try:
-            raw = raw.encode("utf-8", "surrogateescape")
-        except UnicodeEncodeError:  # a surrogate that no decoder made: not text at all
-            raw = raw.encode("utf-8", "replace")
-    try:
-        return raw.decode("utf-8"), None
-    except UnicodeDecodeError as exc:
-        text = raw.decode("latin-1")
-        return text, (
-            f"typed text is not UTF-8 (byte 0x{raw[exc.start]:02x} at {exc.start + 1}); "
-            f"read as Latin-1: {text!r}"
-        )
 
 
 class Session:
@@ -288,7 +138,7 @@ class Session:
         Receives the operator's monitor lines.
     settings : dict
         Engine settings (``snap_mm``, ``sample_tolerance_mm``, ``autosave_every``,
-        ``start_z_m``; :data:`apygis.compile.journal.SETTINGS`).
+        ``start_z_m``; :data:`apygis.session.journal.SETTINGS`).
     lock : SessionLock, optional
         The map's lock, already taken (the CLI takes it before it copies the
         map); else the session takes it first thing, and a map another
@@ -360,6 +210,7 @@ class Session:
         self._last_status = None
         self._last_steps: tuple[int, int, int, int] = (0, 0, 0, 0)
         self._replaying = False
+        self.display = DisplayState()
         if self.journal_path.exists() and discard_journal:
             aside = _aside(self.journal_path)
             self.journal_path.rename(aside)
@@ -473,6 +324,10 @@ class Session:
     def _effect(self, e) -> None:
         if isinstance(e, RECORD_EFFECTS):
             self.entries += 1
+        elif isinstance(e, DisplayScale):  # state, kept through a replay too
+            self.display.scale = e.factor
+        elif isinstance(e, CrosshairScale):
+            self.display.crosshair = e.factor
         if self._replaying or self.finished:  # recovery, or after the end: act on nothing
             return
         if isinstance(e, Plates):
@@ -482,9 +337,13 @@ class Session:
                 self.motors.move_to(x, y, z, a, wait=False)
         elif isinstance(e, RECORD_EFFECTS):
             self.monitor(_entry_line(self.entries, self.map.id, e))
-        elif isinstance(e, Message):
+        elif isinstance(e, (Message, Ignored)):
             for line in e.text.split("\n"):
                 self.monitor(f"  {line}")
+        elif isinstance(e, DisplayScale):
+            self.monitor(f"  display scale factor {e.factor:g}x")
+        elif isinstance(e, CrosshairScale):
+            self.monitor(f"  crosshair scale {e.factor:g}x")
         elif isinstance(e, Status):
             key = (e.mode, e.layer, e.prompt)
             if key != self._last_status:

@@ -154,10 +154,10 @@ def script(m, g):
 
 
 def make(outdir: Path = HERE) -> None:
-    from apygis.compile.session import ReportDecoder, Session, run_tablet_stream
     from apygis.instrument.replay import Replayer
     from apygis.instrument.simulator import BUTTONS
     from apygis.instrument.tablet import make_parser
+    from apygis.session import ReportDecoder, Session, run_tablet_stream
 
     o = orientation()
     save_orientation(o, outdir / "ZH1091.orientation.json")

@@ -9,8 +9,11 @@ import pytest
 import apygis
 from apygis.compile.engine import (
     Added,
+    CrosshairScale,
     Deleted,
+    DisplayScale,
     Engine,
+    Ignored,
     Keys,
     Mark,
     Message,
@@ -345,17 +348,22 @@ def test_proceed_menu_items_and_terminate():
     op.press("PROCEED")
     assert any(m.startswith("T.r: 0 symbols (0.0 %)") for m in op.messages())
     op.number("1")
-    op.press("2", "POINT", "5", "ENTER")
+    out = op.press("2", "POINT", "5", "ENTER")
+    assert DisplayScale(2.5) in out
     assert op.eng.display_scale == 2.5
     op.number("1")
     op.number("30")
     assert "a value from 0.25 to 25.0, please" in op.messages()
-    op.eng.mode = "proceed"
+    assert op.eng.mode == "proceed_value"  # until a value in range
+    out = op.number("4")
+    assert DisplayScale(4.0) in out
+    assert op.eng.display_scale == 4.0
     out = op.number("2")
     assert ZeroPlates() in out
     op.number("3")
     op.send(Keys("0.5"))
-    op.press("ENTER")
+    out = op.press("ENTER")
+    assert CrosshairScale(0.5) in out
     assert op.eng.crosshair_scale == 0.5
     op.number("6")
     op.send(Keys("h"))
@@ -366,7 +374,10 @@ def test_proceed_menu_items_and_terminate():
     out = op.number("4")
     assert Save("terminate") in out
     assert Terminate() in out
-    assert op.eng.handle(Press("ENTER"))[0] == Message("compilation terminated")
+    assert op.eng.terminated
+    ignored = Ignored("ENTER", "terminated", "compilation terminated")
+    assert op.eng.handle(Press("ENTER")) == [ignored]
+    assert op.eng.handle(Mark(0.0, 0.0)) == [Message("compilation terminated")]
 
 
 def test_autosave_every_fifty_entries():

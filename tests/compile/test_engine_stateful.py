@@ -29,8 +29,8 @@ from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, 
 import apygis
 from apygis.compile.engine import RECORD_EFFECTS, Engine, Keys, Mark, Press, Undone
 from apygis.compile.geometry import PlaneGeometry
-from apygis.compile.journal import Journal, read_journal
 from apygis.instrument.simulator import BUTTONS
+from apygis.session.journal import Journal, read_journal
 
 E0, N0 = 2683000.0, 1247000.0
 GEO = PlaneGeometry(E0, N0, scale=5000, height_step_m=0.05)
@@ -73,8 +73,8 @@ def _records(m: apygis.MapFile) -> dict:
 
 
 def _engine_state(e: Engine) -> tuple:
-    return (e.mode, e.layer_ext, e.buf, e.entries, e.line_first, e.line_end, e.sampling,
-            e.terminated, e.z_model, len(e._undo))  # fmt: skip
+    return (e.mode, e.state, e.line_aside, e.layer_ext, e.buf, e.entries, e.terminated,
+            e.z_model, e.display_scale, e.crosshair_scale, len(e._undo))  # fmt: skip
 
 
 class EngineMachine(RuleBasedStateMachine):
@@ -125,7 +125,7 @@ class EngineMachine(RuleBasedStateMachine):
     @precondition(lambda self: self.engine.mode == "line")
     @rule()
     def sample_on(self):
-        if not self.engine.sampling:
+        if not self.engine.state.sampling:
             self._send(Press("SAMPLE"))
 
     # whole dialogues, so that entries happen often (the single events above add chaos)

@@ -8,9 +8,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from apygis.compile.journal import read_journal
 from apygis.errors import FormatError
 from apygis.instrument.replay import Replayer
+from apygis.session.journal import read_journal
 
 HEAD = {"journal": 2, "map": "", "layer": "r", "settings": {}, "files": {}}
 

@@ -19,9 +19,7 @@ from click.testing import CliRunner
 import apygis
 from apygis.cli import main
 from apygis.compile.engine import Mark, Press
-from apygis.compile.journal import read_journal
 from apygis.compile.oriented import OrientedGeometry
-from apygis.compile.session import ReportDecoder, Session, run_live, run_tablet_stream
 from apygis.errors import FormatError
 from apygis.formats import ascii as apa
 from apygis.instrument.motors import SimulatedGrbl, open_controller
@@ -29,6 +27,8 @@ from apygis.instrument.replay import Chunk, Replayer
 from apygis.instrument.simulator import BUTTONS, ScriptBuilder, VirtualInstrument
 from apygis.instrument.tablet import TabletConfig, make_parser
 from apygis.orient.io import load_orientation
+from apygis.session import ReportDecoder, Session, run_live, run_tablet_stream
+from apygis.session.journal import read_journal
 from tests.conftest import ROOT, SAMPLES
 
 SESSION = SAMPLES / "session"
@@ -210,7 +210,7 @@ def test_recovery_restores_records_and_the_line_in_progress(tmp_path, geometry):
     s2 = Session(base, geometry, layer="c", monitor=lines.append)
     assert s2.recovered == 3 + 7 + 3
     assert s2.engine.mode == "line"
-    assert s2.engine.line_end == 3
+    assert s2.engine.state.end == 3
     s2.handle(Mark(*geometry.tablet(2684040.0, 1247800.0)))
     s2.handle(Press("ENTER"))
     assert s2.map.layers["r"].closure(1).points == (1, 2, 3, 4)

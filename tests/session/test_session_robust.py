@@ -20,9 +20,13 @@ from click.testing import CliRunner
 import apygis
 from apygis.cli import main
 from apygis.compile.engine import Keys, Mark, Press
-from apygis.compile.journal import StaleJournalError, read_journal
 from apygis.compile.oriented import OrientedGeometry
-from apygis.compile.session import (
+from apygis.errors import ApygisError, FormatError
+from apygis.instrument.replay import Chunk
+from apygis.instrument.simulator import BUTTONS
+from apygis.instrument.tablet import TabletConfig, make_parser
+from apygis.orient.io import load_orientation
+from apygis.session import (
     ReportDecoder,
     SaveError,
     Session,
@@ -31,11 +35,7 @@ from apygis.compile.session import (
     run_live,
     run_tablet_stream,
 )
-from apygis.errors import ApygisError, FormatError
-from apygis.instrument.replay import Chunk
-from apygis.instrument.simulator import BUTTONS
-from apygis.instrument.tablet import TabletConfig, make_parser
-from apygis.orient.io import load_orientation
+from apygis.session.journal import StaleJournalError, read_journal
 from tests.conftest import ROOT, SAMPLES
 
 SESSION = SAMPLES / "session"
@@ -373,7 +373,7 @@ def test_run_live_and_replay_decode_keyboard_bytes(tmp_path, geometry):
     s.handle_all(Press(b) for b in ("DESCR", "3", "ENTER"))
     chunks = [Chunk(0.0, "keyboard", b"Gr\xfcn\n")]
     run_tablet_stream(s, chunks, make_parser("calcomp", CFG), ReportDecoder(CFG, BUTTONS))
-    assert s.engine.text == "Grün"
+    assert s.engine.state.text == "Grün"
 
     class Quiet:
         in_waiting = 0
@@ -390,7 +390,7 @@ def test_run_live_and_replay_decode_keyboard_bytes(tmp_path, geometry):
     typed = queue.Queue()
     typed.put("Z\udcfcrich")
     run_live(s, Quiet(), make_parser("calcomp", CFG), ReportDecoder(CFG, BUTTONS), typed)
-    assert s.engine.text == "Zürich"
+    assert s.engine.state.text == "Zürich"
     s.close()
 
 
@@ -599,7 +599,7 @@ def test_a_journal_that_cannot_be_written_stops_the_session_cleanly(tmp_path, ge
 
 
 def test_lock_holder_note_and_release_are_robust(tmp_path):
-    from apygis.compile.session import SessionLock
+    from apygis.session import SessionLock
 
     lock = SessionLock.acquire(tmp_path / "L")
     info = json.loads((tmp_path / "L.lock").read_text())
