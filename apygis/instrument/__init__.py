@@ -19,7 +19,8 @@ convert to and from ground coordinates.
 - :mod:`~apygis.instrument.replay`: record the raw bytes of a session and
   replay them.
 
-Serial ports are opened only with ``serial.serial_for_url()``, so that
+Serial ports are opened only with ``serial.serial_for_url()``
+(:func:`~apygis.instrument.ports.open_url`), so that
 ``loop://``, ``socket://host:port``, ``spy://`` and ptys work everywhere.
 The formats are specified in ``docs/protocols.md`` and ``docs/button-pad.md``.
 """

@@ -57,6 +57,7 @@ from apygis.instrument.grbl import (
     format_move,
     parse_status,
 )
+from apygis.instrument.ports import open_url
 from apygis.instrument.simgrbl import SimulatedGrbl
 
 __all__ = [
@@ -499,12 +500,13 @@ def open_controller(
     (``socket://127.0.0.1:PORT``, ``spy://...``). ``kwargs`` go to
     :class:`MotorController` (``rx_buffer``).
     """
-    import serial
-
-    try:
-        port = serial.serial_for_url(url, baudrate=baudrate, timeout=0.05, write_timeout=timeout)
-    except (serial.SerialException, OSError, ValueError) as exc:
-        raise MotorError(f"cannot open the motor controller port: {exc}", port=url) from exc
+    port = open_url(
+        url,
+        lambda exc: MotorError(f"cannot open the motor controller port: {exc}", port=url),
+        baudrate=baudrate,
+        timeout=0.05,
+        write_timeout=timeout,
+    )
     ctl = MotorController(port, timeout=timeout, name=url, **kwargs)
     if connect:
         try:

@@ -18,11 +18,14 @@ import threading
 import time
 
 from apygis.errors import InstrumentError
-from apygis.instrument.grbl import AXES, format_status
+from apygis.instrument.grbl import AXES, RESET, STATUS_QUERY, format_status
 
 __all__ = ["SimulatedGrbl"]
 
 log = logging.getLogger(__name__)
+
+_RESET = RESET[0]
+_QUERY = STATUS_QUERY[0]
 
 _WORD = re.compile(r"([A-Z])([-+]?(?:\d+\.?\d*|\.\d+))")
 
@@ -110,10 +113,10 @@ class SimulatedGrbl:
             if self._outbox:
                 out.append(self.take_output().decode("ascii", "replace"))
             for c in data:
-                if c == 0x18:
+                if c == _RESET:
                     self._line.clear()
                     self._reset(out)
-                elif c == 0x3F:  # ?
+                elif c == _QUERY:
                     if not self.mute:
                         out.append(self._status())
                 elif c in (0x21, 0x7E) or c >= 0x80:  # ! ~ and extended real-time commands
@@ -147,11 +150,14 @@ class SimulatedGrbl:
 
     def _reset(self, out: list) -> None:
         self.motion, self.absolute, self.feed = "G0", True, None
-        out.append(f"\r\n{self.banner}\r\n")
+        out.append(self._banner_text())
         if self.critical:
             self.critical = False
             self.alarm = 2
             out.append("[MSG:'$H'|'$X' to unlock]\r\n")
+
+    def _banner_text(self) -> str:
+        return f"\r\n{self.banner}\r\n"
 
     def _status(self) -> str:
         state = "Alarm" if self.alarm else "Idle"
@@ -363,7 +369,7 @@ class SimulatedGrbl:
     def _serve_conn(self, conn: socket.socket) -> None:
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         if self.banner_on_connect:
-            conn.sendall(f"\r\n{self.banner}\r\n".encode("ascii"))
+            conn.sendall(self._banner_text().encode("ascii"))
         while not self._stop.is_set():
             r, _, _ = select.select([conn], [], [], 0.05)
             if self._outbox:

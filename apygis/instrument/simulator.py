@@ -54,17 +54,9 @@ from pathlib import Path
 
 from apygis.errors import FormatError, InstrumentError, ProtocolError
 from apygis.instrument.pad import BUTTON_CODES, BUTTONS, button_code
+from apygis.instrument.ports import open_url
 from apygis.instrument.replay import Chunk
-from apygis.instrument.tablet import (
-    PROTOCOLS,
-    Parser,
-    Report,
-    TabletConfig,
-    encode_ascii,
-    encode_calcomp,
-    encode_mm,
-    make_parser,
-)
+from apygis.instrument.tablet import Parser, Report, TabletConfig, make_encoder, make_parser
 
 __all__ = [
     "BUTTONS",
@@ -477,22 +469,11 @@ class VirtualInstrument:
         **options,
     ):
         protocol = str(protocol).lower()
-        if protocol not in PROTOCOLS:
-            raise ProtocolError(
-                f"unknown tablet protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}"
-            )
-        if protocol != "ascii" and options:
-            raise ProtocolError(f"{protocol}: unexpected options {sorted(options)}")
+        self._encode = make_encoder(protocol, **options)
         self.protocol = protocol
         self.config = config or TabletConfig()
         self.rate = rate
         self.options = options
-        if protocol == "mm":
-            self._encode = encode_mm
-        elif protocol == "calcomp":
-            self._encode = encode_calcomp
-        else:
-            self._encode = lambda x, y, b, p: encode_ascii(x, y, b, p, **options)
 
     def parser(self, **kwargs) -> Parser:
         """A parser for this instrument's bytes (same protocol, options and config)."""
@@ -583,12 +564,12 @@ class VirtualInstrument:
 
     def play_url(self, script: Script, url: str, *, baudrate: int = 9600, **kwargs) -> int:
         """Open ``url`` with ``serial.serial_for_url``, :meth:`play` the script, close it."""
-        import serial
-
-        try:
-            port = serial.serial_for_url(url, baudrate=baudrate, timeout=1.0)
-        except (serial.SerialException, OSError, ValueError) as exc:
-            raise InstrumentError(f"{url}: cannot open the tablet port: {exc}") from exc
+        port = open_url(
+            url,
+            lambda exc: InstrumentError(f"{url}: cannot open the tablet port: {exc}"),
+            baudrate=baudrate,
+            timeout=1.0,
+        )
         try:
             return self.play(script, port, **kwargs)
         finally:

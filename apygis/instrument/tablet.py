@@ -71,6 +71,7 @@ Examples
 from __future__ import annotations
 
 import abc
+import functools
 import logging
 import math
 import re
@@ -90,6 +91,7 @@ __all__ = [
     "encode_ascii",
     "encode_calcomp",
     "encode_mm",
+    "make_encoder",
     "make_parser",
     "read_reports",
 ]
@@ -381,6 +383,7 @@ class Parser(abc.ABC):
         self.resyncs = 0
         self.rejected = 0
         self._garbage = False
+        self._pending = b""  # a report not yet complete: an open binary run, a line without LF
 
     @abc.abstractmethod
     def feed(self, data: bytes) -> list[Report]:
@@ -393,6 +396,7 @@ class Parser(abc.ABC):
     def reset(self) -> None:
         """Forget any partial packet (after a reconnect); keep the counters."""
         self._garbage = False
+        self._pending = b""
 
     @abc.abstractmethod
     def encode(self, report: Report) -> bytes:
@@ -414,6 +418,25 @@ class Parser(abc.ABC):
             self.resyncs += 1
             self._garbage = True
 
+    def _plausible(self, x: int, y: int, button: int, proximity: bool, raw: bytes):
+        """The report, if its position and button pass the configured limits; else None.
+
+        A report that fails is counted as rejected (the caller discards its bytes).
+        """
+        if not (self._xlo <= x <= self._xhi and self._ylo <= y <= self._yhi):
+            self._reject(raw, f"position {x}, {y} outside the active area")
+            return None
+        if button > self._maxb:
+            self._reject(raw, f"button {button} above {self._maxb}")
+            return None
+        self._garbage = False
+        return Report(x, y, button, proximity, raw)
+
+    def _reject(self, raw: bytes, why: str) -> None:
+        self.rejected += 1
+        if log.isEnabledFor(logging.DEBUG):
+            log.debug("%s: rejected report %s: %s", self.name, raw.hex(" "), why)
+
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.stats}>"
 
@@ -426,11 +449,6 @@ class _BinaryParser(Parser):
     def __init__(self, config: TabletConfig | None = None, *, confirm: bool = True):
         super().__init__(config)
         self.confirm = bool(confirm)
-        self._pending = b""  # an open run: a phasing byte and up to packet_len - 1 bytes
-
-    def reset(self) -> None:
-        super().reset()
-        self._pending = b""
 
     def feed(self, data: bytes) -> list[Report]:
         if self._pending:
@@ -483,22 +501,6 @@ class _BinaryParser(Parser):
     @abc.abstractmethod
     def _decode(self, run: bytes) -> Report | None:
         """The report a complete packet holds, or None (counted as rejected)."""
-
-    def _plausible(self, x: int, y: int, button: int, proximity: bool, run: bytes):
-        """The report, if its position and button pass the configured limits; else None."""
-        if not (self._xlo <= x <= self._xhi and self._ylo <= y <= self._yhi):
-            self._reject(run, f"position {x}, {y} outside the active area")
-            return None
-        if button > self._maxb:
-            self._reject(run, f"button {button} above {self._maxb}")
-            return None
-        self._garbage = False
-        return Report(x, y, button, proximity, run)
-
-    def _reject(self, run: bytes, why: str) -> None:
-        self.rejected += 1
-        if log.isEnabledFor(logging.DEBUG):
-            log.debug("%s: rejected packet %s: %s", self.name, run.hex(" "), why)
 
 
 class MMBinaryParser(_BinaryParser):
@@ -656,12 +658,10 @@ class AsciiParser(Parser):
         self.flag_width = flag_width
         self.signed = bool(signed)
         self.max_line = int(max_line)
-        self._pending = b""
         self._skip_line = False
 
     def reset(self) -> None:
         super().reset()
-        self._pending = b""
         self._skip_line = False
 
     def feed(self, data: bytes) -> list[Report]:
@@ -721,17 +721,14 @@ class AsciiParser(Parser):
             return None
         x = int(mx.group(1))
         y = int(my.group(1))
-        button = int(mf.group(1))
-        if (
-            (not self.signed and (x < 0 or y < 0 or b"-" in parts[0] or b"-" in parts[1]))
-            or not (self._xlo <= x <= self._xhi and self._ylo <= y <= self._yhi)
-            or button > self._maxb
-        ):
-            self.rejected += 1
+        if not self.signed and (x < 0 or y < 0 or b"-" in parts[0] or b"-" in parts[1]):
+            self._reject(raw, "a negative coordinate, and the format is unsigned")
+            rep = None
+        else:
+            rep = self._plausible(x, y, int(mf.group(1)), mp is None or mp.group(1) == b"1", raw)
+        if rep is None:
             self._discard(len(raw))
-            return None
-        self._garbage = False
-        return Report(x, y, button, mp is None or mp.group(1) == b"1", raw)
+        return rep
 
     def encode(self, report: Report) -> bytes:
         return encode_ascii(
@@ -752,6 +749,37 @@ PROTOCOLS: dict[str, type[Parser]] = {
 }
 
 
+#: The encoder of each protocol: (x_counts, y_counts, button, proximity, **options) -> bytes.
+_ENCODERS = {"mm": encode_mm, "calcomp": encode_calcomp, "ascii": encode_ascii}
+
+
+def _protocol_class(protocol: str) -> type[Parser]:
+    try:
+        return PROTOCOLS[protocol.lower()]
+    except (KeyError, AttributeError):
+        raise ProtocolError(
+            f"unknown tablet protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}"
+        ) from None
+
+
+def make_encoder(protocol: str, **options):
+    """The encoder of a protocol named in :data:`PROTOCOLS`: ``(x, y, button, proximity) -> bytes``.
+
+    ``options`` are the format options of ``ascii`` (``width``, ``flag_width``,
+    ``signed``); the binary formats take none.
+
+    Examples
+    --------
+    >>> make_encoder("ascii", width=None)(12, 5, 11, True)
+    b'12,5,11\\r\\n'
+    """
+    cls = _protocol_class(protocol)
+    if cls is not AsciiParser and options:
+        raise ProtocolError(f"{protocol}: unexpected options {sorted(options)}")
+    encode = _ENCODERS[cls.name]
+    return functools.partial(encode, **options) if options else encode
+
+
 def make_parser(protocol: str, config: TabletConfig | None = None, **options) -> Parser:
     """A parser for a protocol named in :data:`PROTOCOLS` (``mm``, ``calcomp``, ``ascii``).
 
@@ -762,12 +790,7 @@ def make_parser(protocol: str, config: TabletConfig | None = None, **options) ->
     >>> make_parser("ascii", width=None)
     <AsciiParser {'packets': 0, 'discarded_bytes': 0, 'resyncs': 0, 'rejected': 0}>
     """
-    try:
-        cls = PROTOCOLS[protocol.lower()]
-    except (KeyError, AttributeError):
-        raise ProtocolError(
-            f"unknown tablet protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}"
-        ) from None
+    cls = _protocol_class(protocol)
     try:
         return cls(config, **options)
     except TypeError as exc:

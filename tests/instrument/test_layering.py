@@ -87,6 +87,7 @@ def test_every_module_is_checked():
         "apygis.instrument.motors",
         "apygis.instrument.simgrbl",
         "apygis.instrument.pad",
+        "apygis.instrument.ports",
         "apygis.instrument.simulator",
         "apygis.instrument.tablet",
         "apygis.instrument.replay",

@@ -17,6 +17,7 @@ from apygis.instrument.tablet import (
     encode_ascii,
     encode_calcomp,
     encode_mm,
+    make_encoder,
     make_parser,
 )
 
@@ -208,6 +209,34 @@ def test_plausibility_rejects():
     m = MMBinaryParser(TabletConfig(x_range=(0, 100)))
     assert feed_all(m, [encode_mm(-5, 0), encode_mm(5, 0)]) == [Report(5, 0)]
     assert m.rejected == 1
+    assert (a.discarded_bytes, a.resyncs) == (32, 1)
+    u = AsciiParser(width=None)  # unsigned: a negative coordinate is rejected like the others
+    assert u.feed(b"-5,3,1\r\n5,3,1\r\n") == [Report(5, 3, 1)]
+    assert (u.rejected, u.discarded_bytes, u.resyncs) == (1, 8, 1)
+
+
+@pytest.mark.parametrize(
+    ("protocol", "options", "report"),
+    [
+        ("mm", {}, Report(-200, 16383, 7, False)),
+        ("CalComp", {}, Report(20000, 300, 27)),
+        ("ascii", {}, Report(1234, 56, 11)),
+        ("ascii", {"width": None, "signed": True}, Report(-12, 5, 0, False)),
+    ],
+)
+def test_make_encoder_is_the_parsers_encoder(protocol, options, report):
+    encode = make_encoder(protocol, **options)
+    data = encode(report.x_counts, report.y_counts, report.button, report.proximity)
+    parser = make_parser(protocol, **options)
+    assert data == parser.encode(report)
+    assert parser.feed(data) + parser.flush() == [report]
+
+
+def test_make_encoder_refuses_unknown_protocols_and_options():
+    with pytest.raises(ProtocolError, match="unknown tablet protocol 'wacom'"):
+        make_encoder("wacom")
+    with pytest.raises(ProtocolError, match=r"mm: unexpected options \['width'\]"):
+        make_encoder("mm", width=5)
 
 
 def test_ascii_bad_lines_and_overlong():
