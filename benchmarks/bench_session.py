@@ -42,7 +42,7 @@ import apygis  # noqa: E402
 from apygis.compile.engine import Engine, Mark, Press  # noqa: E402
 from apygis.compile.oriented import OrientedGeometry  # noqa: E402
 from apygis.instrument.motors import MotorController, SimulatedGrbl  # noqa: E402
-from apygis.instrument.simulator import BUTTONS  # noqa: E402
+from apygis.instrument.pad import BUTTONS  # noqa: E402
 from apygis.instrument.tablet import TabletConfig, encode_calcomp, make_parser  # noqa: E402
 from apygis.orient.io import load_orientation  # noqa: E402
 from apygis.session import ReportDecoder, Session  # noqa: E402

@@ -130,8 +130,8 @@ def session(
         ProtocolError,
         RecordError,
     )
+    from apygis.instrument.pad import BUTTONS
     from apygis.instrument.replay import Replayer, check_recording
-    from apygis.instrument.simulator import BUTTONS
     from apygis.instrument.tablet import TabletConfig, make_parser
     from apygis.model.map import check_ext
     from apygis.model.symbols import load_library

@@ -23,7 +23,7 @@ Mark(x_mm=1.5, y_mm=-2.0)
 >>> DisplayScale(30.0)
 Traceback (most recent call last):
 ...
-apygis.errors.RecordError: display scale factor 30: must be from 0.25 to 25
+apygis.errors.RecordError: display scale factor 30.0: must be from 0.25 to 25
 """
 
 from __future__ import annotations

@@ -93,7 +93,7 @@ class JournalWriteError(ApygisError, OSError):
 
 
 def _button_names() -> frozenset[str]:
-    from apygis.instrument.simulator import BUTTONS
+    from apygis.instrument.pad import BUTTONS
 
     return frozenset(BUTTONS.values())
 

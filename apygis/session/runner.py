@@ -57,7 +57,7 @@ from apygis.compile.events import (
     ZeroPlates,
 )
 from apygis.errors import ApygisError, OrientationError
-from apygis.instrument.simulator import BUTTONS
+from apygis.instrument.pad import BUTTONS
 from apygis.model.map import MapFile
 from apygis.model.topology import margin_mask
 from apygis.session.decoder import ReportDecoder, decode_typed

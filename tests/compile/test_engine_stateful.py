@@ -29,7 +29,7 @@ from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, 
 import apygis
 from apygis.compile.engine import RECORD_EFFECTS, Engine, Keys, Mark, Press, Undone
 from apygis.compile.geometry import PlaneGeometry
-from apygis.instrument.simulator import BUTTONS
+from apygis.instrument.pad import BUTTONS
 from apygis.session.journal import Journal, read_journal
 
 E0, N0 = 2683000.0, 1247000.0

@@ -22,8 +22,8 @@ from apygis.cli import main
 from apygis.compile.engine import Keys, Mark, Press
 from apygis.compile.oriented import OrientedGeometry
 from apygis.errors import ApygisError, FormatError
+from apygis.instrument.pad import BUTTONS
 from apygis.instrument.replay import Chunk
-from apygis.instrument.simulator import BUTTONS
 from apygis.instrument.tablet import TabletConfig, make_parser
 from apygis.orient.io import load_orientation
 from apygis.session import (
