@@ -109,14 +109,15 @@ class SimulatedGrbl:
     def handle(self, data: bytes) -> bytes:
         """Take bytes from the client; return the controller's answer bytes."""
         out = []
+        reset, query = _RESET, _QUERY  # locals: this loop runs once a byte
         with self._lock:
             if self._outbox:
                 out.append(self.take_output().decode("ascii", "replace"))
             for c in data:
-                if c == _RESET:
+                if c == reset:
                     self._line.clear()
                     self._reset(out)
-                elif c == _QUERY:
+                elif c == query:
                     if not self.mute:
                         out.append(self._status())
                 elif c in (0x21, 0x7E) or c >= 0x80:  # ! ~ and extended real-time commands
