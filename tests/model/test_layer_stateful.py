@@ -24,6 +24,7 @@ import math
 import tempfile
 from pathlib import Path
 
+import numpy as np
 from hypothesis import event, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import (
@@ -35,7 +36,8 @@ from hypothesis.stateful import (
 
 import apygis
 from apygis.errors import ApygisError
-from apygis.model.records import NO_REF
+from apygis.model.map import Layer
+from apygis.model.records import APY_MAX_NUM, NO_REF, REF_FIELDS
 
 MISSING = 99_999  # a point number no table of this machine reaches
 
@@ -54,15 +56,29 @@ texts = st.text(
 class LayerMachine(RuleBasedStateMachine):
     """One layer, edited at random; a shadow count of its records."""
 
-    @initialize(lines=st.lists(st.tuples(st.lists(xyz, min_size=1, max_size=6), codes), max_size=4))
-    def start(self, lines):
+    @initialize(
+        lines=st.lists(st.tuples(st.lists(xyz, min_size=1, max_size=6), codes), max_size=4),
+        high_numbers=st.booleans(),
+    )
+    def start(self, lines, high_numbers):
+        """A few open lines to start from; numbered up to 9999 when ``high_numbers``.
+
+        Then new points take the lowest free numbers: numbers no longer follow
+        the rows, and lookups by number are put to the test.
+        """
         self.map = apygis.MapFile("T9", scale=5000, notes="issue 9")
         self.lay = self.map.layer("r")
         self.n = {"symbols": 0, "line_points": 0, "lines": 0, "closed_lines": 0, "texts": 0}
-        for points, code in lines:  # a few open lines to start from
+        for points, code in lines:
             self.lay.add_line(points, code)
             self.n["line_points"] += len(points)
             self.n["lines"] += 1
+        lp = self.lay.line_points.copy()
+        if high_numbers and len(lp):
+            shift = APY_MAX_NUM - int(lp["num"].max())
+            for f in ("num", *REF_FIELDS):
+                lp[f] = np.where(lp[f] == NO_REF, NO_REF, lp[f] + shift)
+            self.lay = self.map.add_layer(Layer.from_arrays("r", line_points=lp))
 
     # ------------------------------------------------------------------ helpers
 
