@@ -21,6 +21,7 @@ absolute       absolute orientation (7-parameter 3-D similarity)
 realtime       the real-time loop and the motor calibration
 io             the orientation file (JSON)
 readers        the text input files (control, measurements, photo file)
+lsq            the least-squares core (dense Gauss-Newton; the bundle adjustment builds on it)
 """
 
 from apygis.orient.absolute import (

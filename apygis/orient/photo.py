@@ -57,7 +57,7 @@ import numpy as np
 
 from apygis.errors import DegenerateGeometryError, MeasurementError, OrientationError
 from apygis.orient._fields import finite_fields
-from apygis.orient._lsq import gauss_newton
+from apygis.orient.lsq import gauss_newton
 from apygis.orient.collinearity import (
     ExteriorOrientation,
     InteriorOrientation,

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from apygis.errors import DegenerateGeometryError, MeasurementError, OrientationError
-from apygis.orient._lsq import gauss_newton
+from apygis.orient.lsq import gauss_newton
 from apygis.orient.collinearity import (
     EO_PARAMETERS,
     ExteriorOrientation,

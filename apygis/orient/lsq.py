@@ -1,11 +1,28 @@
-"""Gauss-Newton least squares shared by the orientation modules (private).
+"""Least squares for photogrammetry: the one core every adjustment in apygis uses.
 
-Solves ``min |f(x)|**2`` where ``f(x) = model(x) - observations`` (already
-weighted by the caller). Each step solves the linearised problem through the
-singular value decomposition of the Jacobian with its columns scaled to unit
-length (so metres, radians and scale factors mix safely); a relative singular
-value below ``rank_tol`` means that the data do not determine the parameters,
-and the error names those in the weakest direction.
+Problem: ``min |f(x)|**2`` where ``f(x) = W^(1/2) (model(x) - observations)``
+(the caller weights its residuals, so ``f`` is dimensionless and sigma0 = 1 a
+priori). Gauss-Newton: each step solves the linearised problem ``J dx = -f``.
+
+Where the least-squares core lives (a decision of issue 10): here, in
+``apygis.orient.lsq``, public. ``orient`` is the lowest layer that adjusts
+anything, and the aerotriangulation (which imports ``orient``) builds its
+bundle adjustment on it:
+
+- :func:`gauss_newton` is the dense solver for small problems (an orientation
+  has at most a few dozen unknowns): each step goes through the singular value
+  decomposition of the Jacobian with its columns scaled to unit length (so
+  metres, radians and scale factors mix safely); a relative singular value
+  below ``rank_tol`` means that the data do not determine the parameters, and
+  the error names those in the weakest direction. The cofactor matrix
+  ``(J^T J)^-1`` of the solution gives the precisions.
+- The bundle adjustment (thousands of photos, hundreds of thousands of points)
+  cannot form a dense Jacobian. It will add, in this module, the sparse
+  normal equations ``N dx = -J^T f`` accumulated block by block (6 x 6
+  orientation blocks, 3 x 3 point blocks), reduced to the orientations by the
+  Schur complement and solved by a sparse Cholesky factorisation, with the
+  same :class:`LsqSolution` contract (``x``, ``f``, ``sigma0``,
+  ``redundancy``, precisions) so that reports and tests treat both alike.
 """
 
 from __future__ import annotations
@@ -22,6 +39,15 @@ __all__ = ["LsqSolution", "gauss_newton"]
 
 @dataclass(frozen=True, eq=False)
 class LsqSolution:
+    """A converged least-squares solution.
+
+    ``x`` the parameters, ``f`` the weighted residuals ``model - observations``
+    at ``x``, ``J`` the Jacobian of ``f`` there, ``cofactor`` ``(J^T J)^-1``
+    (multiply by ``sigma0**2`` for the covariance), ``iterations`` the steps
+    taken. ``redundancy`` is observations minus unknowns; with none, nothing
+    is checked and ``sigma0`` is NaN.
+    """
+
     x: np.ndarray
     f: np.ndarray  # model - observations at x (weighted)
     J: np.ndarray
