@@ -33,7 +33,7 @@ Reading takes either one ``.gen`` file (points or lines, detected from the
 content; a companion ``.csv`` beside it is used when present) or the name of
 a set (``out/ZH1091.gen`` when ``out/ZH1091_*_lines.gen`` and the others
 exist). Lines come back "in string format": the references are rebuilt with
-:func:`apygis.model.build.add_lines` (consecutive vertices become forward and
+:func:`apygis.model.polylines.add_lines` (consecutive vertices become forward and
 backward references, ends that coincide within ``tolerance_m`` with a vertex
 of another line become junctions or merge points), so that AREA and closure
 checks work on imported data. Point numbers of line points are allocated
@@ -66,7 +66,7 @@ from apygis.formats._io import (
 )
 from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows
 from apygis.model import topology
-from apygis.model.build import add_lines, export_lines, tolerance_in_crs
+from apygis.model.polylines import add_lines, export_lines, tolerance_in_crs
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text
 from apygis.model.records import MAX_CODE, SYMBOL_DTYPE, TEXT_DTYPE
 

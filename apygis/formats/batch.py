@@ -116,7 +116,7 @@ def convert_file(
         verify_set(in_drv, src)  # a set half-replaced by an interrupted write is refused
         m = in_drv.reader(os.fspath(src), **_accepted(in_drv.reader, opts))
         if to_crs is not None:
-            from apygis.model.transform import reproject
+            from apygis.model.reproject import reproject
 
             m = reproject(m, to_crs)
         out_drv = get_driver(driver, "w") if driver else driver_for(dst, "w")

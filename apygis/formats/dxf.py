@@ -32,7 +32,7 @@ legacy files; what it repaired is logged): model-space ``POINT`` and
 their object coordinate system, or 3-D) and flattened ``ARC``, ``CIRCLE``,
 ``ELLIPSE`` and ``SPLINE`` become lines, ``TEXT`` and ``MTEXT`` texts. DXF
 layers map to map layers by ``layer_map``; lines without apygis XDATA get
-their topology rebuilt by :func:`apygis.model.build.add_lines`. A file that
+their topology rebuilt by :func:`apygis.model.polylines.add_lines`. A file that
 apygis wrote and nobody changed since (the header record holds the size and
 CRC-32 of the entities section) is parsed by the writer's own templates
 instead of ezdxf: the same records, a hundred times faster.
@@ -70,7 +70,7 @@ from apygis.errors import ApygisError, DriverError, FormatError, ValueRangeError
 from apygis.formats import Driver
 from apygis.formats._io import atomic_write_many, read_bytes
 from apygis.formats._readguard import MAX_COORD, ascii_int, check_str, exact, loads_json
-from apygis.model.build import export_lines
+from apygis.model.polylines import export_lines
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, crs_string
 from apygis.model.records import (
     LINE_DTYPE,
@@ -366,7 +366,7 @@ def drawing_units(map_: MapFile) -> tuple[int, int, float]:
     >>> drawing_units(MapFile("A", crs="EPSG:2229"))[:2]
     (21, 0)
     """
-    from apygis.model.build import metres_per_unit_at
+    from apygis.model.polylines import metres_per_unit_at
 
     if map_.crs is None:
         return 6, 1, 1.0
@@ -1181,7 +1181,7 @@ def _plain_lines(layer: Layer, lines: list, closed: list, code: int) -> None:
 
 
 def _make_layer(ext: str, c: _Collect, opts: dict, path) -> Layer:
-    from apygis.model.build import add_lines
+    from apygis.model.polylines import add_lines
 
     sym = np.zeros(len(c.sym), SYMBOL_DTYPE)
     if c.sym:
@@ -1271,7 +1271,7 @@ def read(
         Code of lines read from plain DXF geometry.
     tolerance_m : float
         Distance within which line ends join other lines (see
-        :func:`apygis.model.build.add_lines`).
+        :func:`apygis.model.polylines.add_lines`).
     topology : bool
         Rebuild junctions and merge lines whose ends meet (default); with
         False every DXF line becomes one chain as it is.

@@ -5,7 +5,7 @@ The mapping is specified in ``docs/formats/e00.md``. In short, writing
 holding coverage ``ZH1091``:
 
 * ``ARC``: one arc per line (chain) of every layer, as
-  :func:`apygis.model.build.export_lines` gives them (a branch starts or ends
+  :func:`apygis.model.polylines.export_lines` gives them (a branch starts or ends
   at its junction's vertex; a closed line repeats its first vertex).
 * ``LAB``: one label point per symbol and per text.
 * ``TOL``: the ten tolerances, unverified. ``PRJ``: the map's CRS as ESRI WKT.
@@ -22,7 +22,7 @@ point numbers, references, heights, codes and texts come from the INFO
 tables, X and Y from the arcs and labels. Any other vector E00 file
 (compressed or not, single or double precision) is read as one layer: arcs
 become lines whose topology is rebuilt with
-:func:`apygis.model.build.add_lines`, label points become symbols. Grid E00
+:func:`apygis.model.polylines.add_lines`, label points become symbols. Grid E00
 files (a ``GRD`` section) are refused.
 
 GDAL's AVCE00 driver reads the files written here as layers ``ARC`` (the AAT
@@ -45,7 +45,7 @@ from apygis.formats import Driver
 from apygis.formats._io import atomic_write_many, check_resolution, read_bytes, significant_step
 from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows, exact, loads_json
 from apygis.model import topology
-from apygis.model.build import add_lines, export_lines
+from apygis.model.polylines import add_lines, export_lines
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
 from apygis.model.records import LINE_DTYPE, MAX_CODE, NO_REF, SYMBOL_DTYPE, TABLES, TEXT_DTYPE
 

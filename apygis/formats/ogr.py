@@ -33,7 +33,7 @@ file reads that OGR layer alone.
 Files apygis did not write are imported too: points become symbols (or
 texts, when the layer has a ``text`` field), lines and polygon rings become
 line points whose references are rebuilt by
-:func:`apygis.model.build.add_lines`. Writes go through pyogrio's vectorised
+:func:`apygis.model.polylines.add_lines`. Writes go through pyogrio's vectorised
 numpy path (whole columns of WKB and attributes), into a temporary file or
 directory beside the target that is then renamed over it.
 """
@@ -417,7 +417,7 @@ def _chunks(text: str) -> list[str]:
 
 def _tables(map_: MapFile, fmt: _Format, crs: str | None) -> list[_Table]:
     """Every OGR layer of the schema for ``map_`` (non-empty ones only), header first."""
-    from apygis.model.build import export_lines
+    from apygis.model.polylines import export_lines
 
     out = [_header_rows(map_, fmt, crs)]
     names = None
@@ -558,7 +558,7 @@ def outputs(map_: MapFile, path, fmt="gpkg") -> list[Path]:
 
 def _tables_skeleton(map_: MapFile) -> list[_Table]:
     """The OGR layers a write produces, names and geometry types only (no data built)."""
-    from apygis.model.build import export_lines
+    from apygis.model.polylines import export_lines
 
     out = [_Table(MAP_TABLE, None, None, [], [], [])]
     for lay in map_:
@@ -1167,7 +1167,7 @@ def _line_edits(
     ``acc`` (rebuilt by ``add_lines``). Returns the rows kept and the branch
     ends whose junction was dropped: ``(num, "fwd" | "back", junction xyz)``.
     """
-    from apygis.model.build import export_lines
+    from apygis.model.polylines import export_lines
 
     ls = export_lines(Layer.from_arrays(ext, line_points=lp))
     lengths = np.diff(ls.offsets)
@@ -1598,7 +1598,7 @@ def read(
         (``r_lines`` -> ``r``), else ``x``, ``y``, ``z``, ``xa``, ... in order.
     tolerance_m : float
         Distance within which line ends of foreign lines join (see
-        :func:`apygis.model.build.add_lines`).
+        :func:`apygis.model.polylines.add_lines`).
     default_code : int
         Code of foreign points and lines without a code field (or with NULL).
     code_field, text_field : str or None
@@ -1747,7 +1747,7 @@ def read(
 
 
 def _add_foreign(lay: Layer, acc: _Foreign, tolerance_m, path, crs=None) -> Layer:
-    from apygis.model.build import add_lines
+    from apygis.model.polylines import add_lines
     from apygis.model.map import _allocate
 
     sym, tx = lay.symbols, lay.texts

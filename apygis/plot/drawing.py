@@ -425,7 +425,7 @@ def build_drawing(
     >>> d.items[1].points.tolist()
     [[15.0, 15.0], [115.0, 15.0], [115.0, 65.0]]
     """
-    from apygis.model.build import export_lines
+    from apygis.model.polylines import export_lines
     from apygis.model.symbols import load_library
 
     pdef = PlotterDef.default() if plotdef is None else plotdef

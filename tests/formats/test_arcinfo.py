@@ -27,7 +27,7 @@ from hypothesis import strategies as st
 import apygis
 from apygis.errors import DriverError, FormatError
 from apygis.formats import arcinfo, driver_for
-from apygis.model.build import export_lines
+from apygis.model.polylines import export_lines
 from tests.conftest import EXTERNAL
 
 GDAL_DIR = EXTERNAL / "gdal"

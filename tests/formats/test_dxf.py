@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 import apygis
 from apygis.errors import DriverError, FormatError, ValueRangeError
 from apygis.formats import dxf, get_driver
-from apygis.model.build import export_lines
+from apygis.model.polylines import export_lines
 from apygis.model.records import LINE_DTYPE, TEXT_DTYPE
 from apygis.model.symbols import default_library
 from tests.conftest import EXTERNAL

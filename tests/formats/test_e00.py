@@ -15,7 +15,7 @@ from pyogrio.raw import read as ogr_read
 import apygis
 from apygis.errors import DriverError, FormatError
 from apygis.formats import driver_for, e00
-from apygis.model.build import export_lines
+from apygis.model.polylines import export_lines
 from tests.conftest import EXTERNAL
 from tests.formats import strategies
 

@@ -70,7 +70,7 @@ def test_generate_writes_degrees_with_enough_decimals(sample_dir, tmp_path):
     text = (tmp_path / "g_r_lines.gen").read_text()
     assert re.search(r"\b8\.\d{9}\b", text)  # longitudes with 9 decimals: 0.1 mm
     back = apygis.read(tmp_path / "g.gen")
-    from apygis.model.transform import reproject
+    from apygis.model.reproject import reproject
 
     want = reproject(m, "EPSG:4326").layers["c"].symbols
     got = back.layers["c"].symbols
@@ -84,7 +84,7 @@ def test_generate_writes_degrees_with_enough_decimals(sample_dir, tmp_path):
 def test_e00_degrees_double_kept_single_refused(sample_dir, tmp_path):
     res = _run("convert", sample_dir / "ZH1091", tmp_path / "d.e00", "--to-crs", "EPSG:4326")
     assert res.exit_code == 0, res.output
-    from apygis.model.transform import reproject
+    from apygis.model.reproject import reproject
 
     w = reproject(apygis.read(sample_dir / "ZH1091"), "EPSG:4326")
     back = apygis.read(tmp_path / "d.e00")

@@ -24,7 +24,7 @@ import shapely.affinity
 
 import apygis
 from apygis.errors import FormatError
-from apygis.model.build import export_lines
+from apygis.model.polylines import export_lines
 from apygis.model.records import NO_REF
 
 # --------------------------------------------------------------------------- QGIS, as OGR edits

@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 import apygis
 from apygis.errors import ApygisError, DriverError, FormatError
 from apygis.formats import driver_for, get_driver, ogr
-from apygis.model.build import export_lines
+from apygis.model.polylines import export_lines
 from tests.formats.strategies import maps, small_map
 
 FORMATS = ("gpkg", "shp", "geojson", "fgb")

@@ -8,7 +8,7 @@ from hypothesis import assume, given, settings
 
 import apygis
 from apygis.errors import RecordError
-from apygis.model.build import add_lines, export_lines
+from apygis.model.polylines import add_lines, export_lines
 from tests.formats.strategies import layers
 
 
@@ -149,7 +149,7 @@ def test_a_line_touching_two_lines_is_joined_at_both_ends(connector):
 
 
 def test_tolerance_in_crs_units():
-    from apygis.model.build import metres_per_unit_at, tolerance_in_crs
+    from apygis.model.polylines import metres_per_unit_at, tolerance_in_crs
 
     assert tolerance_in_crs(0.005, None) == 0.005
     assert tolerance_in_crs(0.005, "EPSG:2056") == 0.005
@@ -167,7 +167,7 @@ def test_tolerance_in_crs_units():
 @pytest.mark.parametrize(("gap_m", "joined"), [(300.0, False), (0.004, True), (0.006, False)])
 def test_add_lines_tolerance_is_metres_in_a_geographic_crs(gap_m, joined):
     """At 60° N a degree of longitude is 55.8 km: 0.005 is 5 mm, never 0.005 degrees."""
-    from apygis.model.build import metres_per_unit_at
+    from apygis.model.polylines import metres_per_unit_at
 
     east, _ = metres_per_unit_at("EPSG:4326", 60.0)
     d = gap_m / east

@@ -1,4 +1,4 @@
-"""CRS reprojection of whole maps (apygis.model.transform)."""
+"""CRS reprojection of whole maps (apygis.model.reproject)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pyproj import CRS
 
 import apygis
 from apygis.errors import ApygisError
-from apygis.model.transform import CRSError, has_height, reproject
+from apygis.model.reproject import CRSError, has_height, reproject
 from tests.formats.strategies import random_rows
 
 

@@ -16,7 +16,7 @@ import pytest
 
 import apygis
 from apygis.errors import FormatError, RecordError
-from apygis.model.build import export_lines
+from apygis.model.polylines import export_lines
 from apygis.model.symbols import default_library
 from apygis.plot.drawing import (
     FilledRects,
