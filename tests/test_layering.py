@@ -17,14 +17,15 @@ import apygis
 
 PKG = Path(apygis.__file__).parent
 
-# part -> the other parts of apygis it may import (errors and progress are the floor)
-FLOOR = {"errors", "progress"}
+# part -> the other parts of apygis it may import (errors, progress and fileio are the floor)
+FLOOR = {"errors", "progress", "fileio"}
 ALLOWED: dict[str, set[str]] = {
     "errors": set(),
     "progress": set(),
+    "fileio": {"errors"},  # atomic writes, guarded reads and JSON, for every layer
     "model": FLOOR,
-    "orient": {"errors"},
-    "instrument": {"errors"},
+    "orient": {"errors", "fileio"},
+    "instrument": {"errors", "fileio"},
     "formats": FLOOR | {"model"},
     "compile": FLOOR | {"model", "orient"},
     "plot": FLOOR | {"model", "formats"},

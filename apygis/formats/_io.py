@@ -1,13 +1,17 @@
-"""File helpers shared by the drivers: atomic writes, set stamps and guarded reads.
+"""File helpers of the drivers: atomic writes of file sets, set stamps, CRS units.
 
-Every writer goes through :func:`atomic_write_many` (bytes in memory) or
-:func:`commit` (files a library such as GDAL wrote into a temporary folder):
+The atomic write itself, the target checks, the guarded read and the guarded
+JSON are :mod:`apygis.fileio` (the floor every layer shares; its names are
+re-exported here); this module adds what is format-specific. Every writer
+goes through :func:`atomic_write_many` (bytes in memory) or :func:`commit`
+(files a library such as GDAL wrote into a temporary folder):
 
 * the target is resolved through symlinks (the file a link points to is
   written, the link stays) and must be a regular file or not exist: a device,
   a directory or a pipe is refused (:class:`~apygis.errors.FileOverwriteError`);
 * every file is written in full to a temporary file beside its final target
   (same directory: the rename cannot cross file systems), flushed and synced;
+  a new file gets the umask's default mode, a replaced file keeps its mode;
 * a set of several files (an APY map, a Shapefile folder, a GENERATE set)
   gets a **set stamp** ``.NAME.apyset``, written (atomically) *before* the
   files are renamed into place, listing every file of the new set with its
@@ -25,22 +29,30 @@ Every writer goes through :func:`atomic_write_many` (bytes in memory) or
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import hashlib
 import json
 import logging
 import math
 import os
-import re
 import secrets
-import stat
 import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from apygis.errors import FileOverwriteError, FormatError, WriteError
-from apygis.formats._readguard import loads_json
+from apygis.errors import FormatError, WriteError
+from apygis.fileio import (
+    TEMP_DIR_PREFIX,
+    check_target,
+    discard,
+    fsync_dir,
+    loads_json,
+    prepare,
+    read_bytes,
+    remove_stale_temps,
+    replace_all,
+    write_failed,
+)
 
 __all__ = [
     "STAMP_SUFFIX",
@@ -66,36 +78,6 @@ STAMP_SUFFIX = ".apyset"
 """A set stamp is ``.NAME.apyset`` (hidden) beside the files of the set ``NAME``."""
 STAMP_FORMAT = "apygis-set"
 
-_TMP_SUFFIX = ".apygis-tmp"
-# .NAME.<pid>-<random>.apygis-tmp (files), .apygis-<pid>-<random>.tmp (folders, see ogr.py)
-_TMP_FILE_RE = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)-[0-9a-f]{8}\.apygis-tmp$")
-_TMP_DIR_RE = re.compile(r"^\.apygis-(?P<pid>\d+)-[0-9a-f]{8}\.tmp$")
-# what earlier versions left: mkstemp's ".NAME.XXXXXXXX.tmp" and mkdtemp's ".apygis-XXXXXXXX.tmp"
-_OLD_FILE_RE = re.compile(r"^\.(?P<name>.+)\.[a-z0-9_]{8}\.tmp$")
-_OLD_DIR_RE = re.compile(r"^\.apygis-[a-z0-9_]{8}\.tmp$")
-
-_KINDS = (
-    (stat.S_ISDIR, "directory"),
-    (stat.S_ISCHR, "character device"),
-    (stat.S_ISBLK, "block device"),
-    (stat.S_ISFIFO, "named pipe"),
-    (stat.S_ISSOCK, "socket"),
-)
-
-
-# --------------------------------------------------------------------------- errors
-
-
-def write_failed(target, exc: OSError, what: str = "cannot write") -> WriteError:
-    """The :class:`WriteError` for an ``OSError`` met while writing ``target``."""
-    reason = exc.strerror or str(exc) or type(exc).__name__
-    if exc.errno == errno.ENOSPC:
-        reason = "no space left on device"
-    err = WriteError(f"{target}: {what}: {reason.lower() if exc.strerror else reason}")
-    err.errno = exc.errno
-    err.filename = str(target)
-    return err
-
 
 def diagnose_write_failure(folder) -> OSError | None:
     """The ``OSError`` behind a library's failed write into ``folder``, where one can be told.
@@ -105,6 +87,7 @@ def diagnose_write_failure(folder) -> OSError | None:
     file system of ``folder`` (no space left) and at the process's file size
     limit (``ulimit -f``) against the files written there. None: neither.
     """
+    import contextlib
     import resource
 
     d = Path(folder)
@@ -127,168 +110,22 @@ def diagnose_write_failure(folder) -> OSError | None:
     return None
 
 
-# --------------------------------------------------------------------------- targets
-
-
-def check_target(target) -> Path:
-    """The file to write for ``target``: symlinks followed, a regular file or none.
-
-    A symlink is written through (the file it points to is replaced, the link
-    stays). Anything that exists and is not a regular file (a device such as
-    ``/dev/full``, a directory, a pipe) is refused.
-    """
-    p = Path(target)
-    real = Path(os.path.realpath(p))
-    try:
-        st = os.stat(real)
-    except FileNotFoundError:
-        return real
-    except OSError as exc:
-        raise write_failed(p, exc) from None
-    if stat.S_ISREG(st.st_mode):
-        return real
-    kind = next((name for test, name in _KINDS if test(st.st_mode)), "special file")
-    via = f" (the target of the link {p})" if real != p.absolute() and p.is_symlink() else ""
-    raise FileOverwriteError(
-        f"{real if via else p}{via}: is a {kind}, not a regular file; "
-        "apygis writes or replaces regular files only"
-    )
-
-
 def stamp_path(base) -> Path:
     """The set stamp ``dir/.NAME.apyset`` of the set ``dir/NAME``."""
     b = Path(base)
     return b.with_name(f".{b.name}{STAMP_SUFFIX}")
 
 
-def _alive(pid: int) -> bool:
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # EPERM: a process of another user
-        return True
-    return True
-
-
-def remove_stale_temps(directory, names: Iterable[str] | None = None) -> list[Path]:
-    """Remove temporary files (and folders) of apygis writes killed in ``directory``.
-
-    Only apygis's own temporary names are touched: files ``.NAME.<pid>-*.apygis-tmp``
-    of a target in ``names`` (any target if None) and folders
-    ``.apygis-<pid>-*.tmp``, whose writing process is gone; and the names of
-    earlier apygis versions (no process id). One still being written by a
-    live process is left alone and reported. Returns what was removed.
-    """
-    import shutil
-
-    d = Path(directory)
-    wanted = None if names is None else set(names)
-    removed = []
-    try:
-        entries = list(os.scandir(d))
-    except OSError:
-        return removed
-    for e in entries:
-        m = _TMP_FILE_RE.match(e.name) or _OLD_FILE_RE.match(e.name)
-        is_dir = False
-        if m is not None and wanted is not None and m["name"] not in wanted:
-            continue
-        if m is None:
-            m = _TMP_DIR_RE.match(e.name) or _OLD_DIR_RE.match(e.name)
-            is_dir = True
-            if m is None:
-                continue
-        pid = int(m["pid"]) if "pid" in m.re.groupindex else None
-        if pid is not None and _alive(pid):
-            if pid != os.getpid():  # a parallel job writing beside us: not a leftover
-                log.info("%s: left alone, still being written by process %d", e.path, pid)
-            continue
-        try:
-            size = _tree_size(Path(e.path)) if is_dir else e.stat(follow_symlinks=False).st_size
-            if is_dir and e.is_dir(follow_symlinks=False):
-                shutil.rmtree(e.path)
-            elif not is_dir and e.is_file(follow_symlinks=False):
-                os.unlink(e.path)
-            else:
-                continue
-        except OSError as exc:
-            log.warning("%s: left by an interrupted write; cannot remove it: %s", e.path, exc)
-            continue
-        log.warning(
-            "removed %s (%s), left by an interrupted write%s",
-            e.path,
-            _size_text(size),
-            f" (process {pid})" if pid is not None else "",
-        )
-        removed.append(Path(e.path))
-    return removed
-
-
-def _tree_size(p: Path) -> int:
-    total = 0
-    for root, _, files in os.walk(p):
-        for f in files:
-            with contextlib.suppress(OSError):
-                total += os.lstat(os.path.join(root, f)).st_size
-    return total
-
-
-def _size_text(n: int) -> str:
-    for unit in ("bytes", "KB", "MB", "GB"):
-        if n < 1024 or unit == "GB":
-            return f"{n} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
-        n /= 1024
-    return f"{n} bytes"  # pragma: no cover
-
-
-def _temp_name(target: Path) -> Path:
-    return target.with_name(f".{target.name}.{os.getpid()}-{secrets.token_hex(4)}{_TMP_SUFFIX}")
-
-
 def make_temp_dir(directory) -> Path:
     """A new temporary folder in ``directory`` with a name :func:`remove_stale_temps` knows."""
     d = Path(directory)
     while True:
-        tmp = d / f".apygis-{os.getpid()}-{secrets.token_hex(4)}.tmp"
+        tmp = d / f"{TEMP_DIR_PREFIX}{os.getpid()}-{secrets.token_hex(4)}.tmp"
         try:
             tmp.mkdir(mode=0o700)
             return tmp
         except FileExistsError:  # pragma: no cover - 32 random bits
             continue
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def _fsync_dir(d: Path) -> None:
-    with contextlib.suppress(OSError):
-        fd = os.open(d, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-
-
-def _write_file(path: Path, data: bytes, target) -> None:
-    try:
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666 & ~_umask())
-    except OSError as exc:
-        raise write_failed(target, exc) from None
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-    except OSError as exc:
-        with contextlib.suppress(OSError):
-            os.unlink(path)
-        raise write_failed(target, exc) from None
 
 
 # --------------------------------------------------------------------------- writing
@@ -317,28 +154,16 @@ def atomic_write_many(
     list of Path
         The targets, as given.
     """
-    pairs = []
-    made: list[Path] = []
-    entries = {}
+    pairs = prepare(contents, parents=True)
     try:
-        for target, data in contents.items():
-            target = Path(target)
-            real = check_target(target)
-            try:
-                real.parent.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise write_failed(target, exc) from None
-            remove_stale_temps(real.parent, [real.name])
-            tmp = _temp_name(real)
-            _write_file(tmp, data, target)
-            made.append(tmp)
-            pairs.append((tmp, real, target))
-            entries[target.name] = _entry(data)
+        entries = (
+            {Path(t).name: _entry(data) for t, data in contents.items()}
+            if stamp is not None
+            else {}
+        )
         commit(pairs, stamp, entries, complete=complete, remove=remove)
     except BaseException:
-        for tmp in made:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
+        discard(pairs)
         raise
     return [Path(t) for t in contents]
 
@@ -401,17 +226,18 @@ def commit(
             _write_stamp(stamp_path, files, before, Path(stamp))
         else:
             stamp_path = None
-    for done, (tmp, real, target) in enumerate(pairs):
-        try:
-            os.replace(tmp, real)
-        except OSError as exc:
-            err = write_failed(target, exc)
-            if done and stamp_path is not None:
-                err = WriteError(
-                    f"{err}; {done} of {len(pairs)} files of the set were replaced, so "
-                    f"{stamp_path.name} now marks the set as incomplete: write it again"
-                )
-            raise err from None
+
+    def incomplete(err: WriteError, done: int) -> WriteError | None:
+        if not done or stamp_path is None:
+            return None
+        more = WriteError(
+            f"{err}; {done} of {len(pairs)} files of the set were replaced, so "
+            f"{stamp_path.name} now marks the set as incomplete: write it again"
+        )
+        more.errno, more.strerror, more.filename = err.errno, err.strerror, err.filename
+        return more
+
+    replace_all(pairs, incomplete)
     for p in remove:
         if p.is_file() and all(p != real for _, real, _ in pairs):
             log.info("removing %s: not part of the set just written", p)
@@ -419,8 +245,8 @@ def commit(
                 os.unlink(p)
             except OSError as exc:
                 raise write_failed(p, exc, "cannot remove the old file") from None
-    for d in {real.parent for _, real, _ in pairs}:
-        _fsync_dir(d)
+    for d in {p.parent for p in remove}:
+        fsync_dir(d)
 
 
 def _write_stamp(real: Path, files: dict, before: dict, named: Path) -> None:
@@ -433,16 +259,7 @@ def _write_stamp(real: Path, files: dict, before: dict, named: Path) -> None:
         "before": dict(sorted(before.items())),
     }
     data = (json.dumps(doc, indent=1) + "\n").encode("utf-8")
-    remove_stale_temps(real.parent, [real.name])
-    tmp = _temp_name(real)
-    _write_file(tmp, data, named)
-    try:
-        os.replace(tmp, real)
-    except OSError as exc:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise write_failed(named, exc) from None
-    _fsync_dir(real.parent)
+    replace_all(prepare({named: data}))
 
 
 def _read_stamp(path: Path) -> dict:
@@ -550,19 +367,6 @@ class _Current:
 def _names(names: list[str]) -> str:
     names = sorted(set(names))
     return ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
-
-
-def read_bytes(path) -> bytes:
-    """The whole file, with a missing or unreadable file reported as a FormatError."""
-    try:
-        with open(path, "rb") as fh:
-            return fh.read()
-    except IsADirectoryError:
-        raise FormatError("is a directory, not a file", path=path) from None
-    except FileNotFoundError:
-        raise FormatError("no such file", path=path) from None
-    except OSError as exc:
-        raise FormatError(f"cannot read: {exc.strerror}", path=path) from None
 
 
 # --------------------------------------------------------------------------- CRS units

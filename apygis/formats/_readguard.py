@@ -7,17 +7,18 @@ deep), a ``ValueError`` from :func:`int` (superscript digits that
 :meth:`str.isdigit` accepts, integers of more than 4300 digits), a string
 that cannot be written back (a lone surrogate), or an overflow further on
 (a coordinate of 1e308 in a KD-tree).
+
+The guarded JSON (:func:`loads_json`) and string check (:func:`check_str`)
+are those of :mod:`apygis.fileio`, shared with every layer; they are
+re-exported here for the readers.
 """
 
 from __future__ import annotations
 
-import json
-import math
-import re
-
 import numpy as np
 
 from apygis.errors import FormatError, RecordError
+from apygis.fileio import MAX_INT_DIGITS, MAX_JSON_DEPTH, check_str, loads_json
 
 __all__ = [
     "MAX_COORD",
@@ -34,16 +35,6 @@ __all__ = [
 
 MAX_COORD = 1e12
 """The largest coordinate magnitude (metres, or degrees) a reader accepts."""
-MAX_JSON_DEPTH = 32
-"""The deepest nesting of arrays and objects in the JSON that files carry."""
-MAX_INT_DIGITS = 18
-"""The most digits of an integer in a file's fields (fits 64 bits)."""
-
-_SURROGATE = re.compile("[\ud800-\udfff]")
-_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
-_OPEN_CLOSE = np.zeros(256, np.int8)
-_OPEN_CLOSE[[ord("["), ord("{")]] = 1
-_OPEN_CLOSE[[ord("]"), ord("}")]] = -1
 
 
 def is_ascii_digits(s: str | bytes) -> bool:
@@ -96,108 +87,6 @@ def exact(check, value):
     if "\n" in value:
         raise RecordError(f"{value!r} holds a line break")
     return out
-
-
-def check_str(s: str, what: str, path=None, record: str | None = None) -> str:
-    """``s``, refused if it holds a lone surrogate (a string that cannot be encoded).
-
-    Such strings come from JSON escapes (``"\\udcfc"``) or from bytes decoded
-    with ``surrogateescape``; a map holding one could not be written.
-    """
-    m = _SURROGATE.search(s)
-    if m is not None:
-        raise FormatError(
-            f"{what} holds an undecodable character (lone surrogate U+{ord(m.group()):04X} "
-            f"at character {m.start() + 1}): not valid Unicode text",
-            path=path,
-            record=record,
-        )
-    return s
-
-
-def _reject_constant(name: str):
-    raise ValueError(f"{name} is not a number JSON allows")
-
-
-def _parse_int(s: str) -> int:
-    v = ascii_int(s, signed=True)
-    if v is None:
-        raise ValueError(f"an integer of {len(s.lstrip('-'))} digits")
-    return v
-
-
-def _parse_float(s: str) -> float:
-    v = float(s)
-    if not math.isfinite(v):
-        raise ValueError(f"the number {s[:30]} overflows")
-    return v
-
-
-def _walk_strings(value, what: str, path, record) -> None:
-    if isinstance(value, str):
-        check_str(value, what, path, record)
-    elif isinstance(value, list):
-        for v in value:
-            _walk_strings(v, what, path, record)
-    elif isinstance(value, dict):
-        for k, v in value.items():
-            check_str(k, what, path, record)
-            _walk_strings(v, what, path, record)
-
-
-def loads_json(text: str | bytes, what: str, path=None, record: str | None = None):
-    """Parse JSON from a file, every failure a FormatError naming ``what``.
-
-    Refused: text that is not UTF-8, nesting deeper than :data:`MAX_JSON_DEPTH`
-    (checked before parsing, in linear time), ``NaN`` and ``Infinity``,
-    numbers that overflow a float, integers of more than
-    :data:`MAX_INT_DIGITS` digits, and strings holding lone surrogates.
-    The caller checks the types of the values it takes.
-
-    >>> loads_json('{"a": [1, 2.5, "x"]}', "metadata")
-    {'a': [1, 2.5, 'x']}
-    >>> loads_json("[" * 100 + "]" * 100, "metadata", "F.r")  # doctest: +ELLIPSIS
-    Traceback (most recent call last):
-    ...
-    apygis.errors.FormatError: F.r: metadata is not UTF-8 JSON: JSON nested 100 deep, ...
-    """
-
-    def fail(why: str):
-        raise FormatError(f"{what} is not UTF-8 JSON: {why}", path=path, record=record)
-
-    if isinstance(text, bytes | bytearray | memoryview):
-        try:
-            text = bytes(text).decode("utf-8")
-        except UnicodeDecodeError as exc:
-            fail(f"not UTF-8 ({exc.reason} at byte {exc.start})")
-    depth = _json_depth(text)
-    if depth > MAX_JSON_DEPTH:
-        fail(f"JSON nested {depth} deep, more than the {MAX_JSON_DEPTH} allowed")
-    try:
-        value = json.loads(
-            text,
-            parse_constant=_reject_constant,
-            parse_int=_parse_int,
-            parse_float=_parse_float,
-        )
-    except RecursionError:  # pragma: no cover - the depth check comes first
-        fail("JSON nested too deep")
-    except ValueError as exc:  # JSONDecodeError and the hooks' refusals
-        fail(f"not JSON ({exc})")
-    _walk_strings(value, what, path, record)
-    return value
-
-
-def _json_depth(text: str) -> int:
-    """The deepest nesting of ``[`` and ``{`` outside strings (an upper bound for bad JSON)."""
-    bare = _JSON_STRING.sub("", text)
-    if not bare:
-        return 0
-    codes = np.frombuffer(bare.encode("utf-8", "surrogatepass"), np.uint8)
-    steps = _OPEN_CLOSE[codes]
-    if not steps.any():
-        return 0
-    return int(np.cumsum(steps, dtype=np.int64).max())
 
 
 def bad_coord_rows(xyz) -> np.ndarray:

@@ -35,14 +35,12 @@ True
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import functools
 import logging
 import operator
 import os
 import re
-import secrets
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from importlib import resources
@@ -51,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from apygis.errors import FormatError, SymbolLibraryError
+from apygis.fileio import atomic_write
 
 __all__ = [
     "ENV_VAR",
@@ -586,29 +585,18 @@ class SymbolLibrary(Mapping):
         The text goes to a temporary file beside the target, which then
         replaces the target with :func:`os.replace`, so that readers see the
         old or the new library, never half of one. An existing file keeps
-        its permissions.
+        its permissions; a symbolic link is written through.
 
         Raises
         ------
-        OSError
-            If the file cannot be written (the target's directory must exist).
+        WriteError
+            If the file cannot be written (an ``OSError``; the target's
+            directory must exist: a missing one is a ``FileNotFoundError``).
+        FileOverwriteError
+            If the path is a directory, a device or a pipe.
         """
         path = Path(path)
-        data = self.to_text().encode("utf-8")
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(data)
-                fh.flush()
-                os.fsync(fh.fileno())
-            with contextlib.suppress(FileNotFoundError):
-                os.chmod(tmp, os.stat(path).st_mode & 0o7777)
-            os.replace(tmp, path)
-        except BaseException:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            raise
+        atomic_write(path, self.to_text().encode("utf-8"))  # apygis.fileio: the one atomic write
         log.debug("wrote symbol library %s", path)
 
 

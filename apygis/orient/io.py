@@ -7,8 +7,9 @@ Angles are radians and follow :mod:`apygis.orient.rotation`. Numbers are
 written with Python's shortest round-trip representation, so save -> load
 gives back the same floats.
 
-Writes are atomic: the text goes to a temporary file beside the target, is
-flushed and synced, and then replaces the target with :func:`os.replace`.
+Writes are atomic (:func:`apygis.fileio.atomic_write`): the text goes to a
+temporary file beside the target, is flushed and synced, and then replaces
+the target with :func:`os.replace`; a replaced file keeps its mode.
 
 Examples
 --------
@@ -21,16 +22,14 @@ True
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 from apygis.errors import ApygisError, FormatError
+from apygis.fileio import atomic_write
 from apygis.orient import _files
 from apygis.orient._files import MAX_JSON_BYTES, parse_json, range_error, read_input
 from apygis.orient.collinearity import ExteriorOrientation, InteriorOrientation
@@ -306,8 +305,8 @@ def loads(text: str | bytes, path=None) -> Orientation:
 
     The JSON is read by the package's guarded parser
     (``apygis.orient._files.parse_json``): ``NaN``/``Infinity``, numbers beyond
-    a double, integers of more than 19 digits and nesting deeper than 32
-    levels are refused with a :class:`FormatError`.
+    a double, integers of more than 18 digits, nesting deeper than 32
+    levels and lone surrogates are refused with a :class:`FormatError`.
     """
     return _parse(parse_json(text, path), path)
 
@@ -328,18 +327,16 @@ def load_orientation(path) -> Orientation:
 
 
 def save_orientation(orientation: Orientation, path) -> Path:
-    """Write an orientation file atomically (temporary file beside it, then ``os.replace``)."""
+    """Write an orientation file atomically (temporary file beside it, then ``os.replace``).
+
+    Raises
+    ------
+    WriteError
+        The file cannot be written (it names the path and the reason); the
+        old file, if any, is left as it was.
+    FileOverwriteError
+        The path is a directory, a device or a pipe.
+    """
     p = Path(path)
-    text = dumps(orientation)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent or ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, p)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
+    atomic_write(p, dumps(orientation).encode("utf-8"))
     return p

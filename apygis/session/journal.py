@@ -42,6 +42,7 @@ from pathlib import Path
 
 from apygis.compile.events import Keys, Mark, Press, event_to_dict
 from apygis.errors import ApygisError, FormatError
+from apygis.fileio import atomic_write
 
 __all__ = [
     "MAX_MARK_MM",
@@ -383,13 +384,7 @@ def upgrade_journal(path, files: dict) -> None:
         head = json.loads(first.decode("utf-8"))
         head["journal"] = VERSION
         head["files"] = files
-        tmp = path.with_name(path.name + ".new")
-        with open(tmp, "wb") as fh:
-            fh.write(json.dumps(head, ensure_ascii=False).encode("utf-8") + b"\n" + rest)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-        _sync_dir(path.parent)
+        atomic_write(path, json.dumps(head, ensure_ascii=False).encode("utf-8") + b"\n" + rest)
     except OSError as exc:
         raise JournalWriteError(
             f"{path}: cannot rewrite the journal as version {VERSION}: {exc.strerror or exc}"
@@ -425,18 +420,10 @@ class Journal:
             "settings": settings,
             "files": files or {},
         }
-        tmp = path.with_name(path.name + ".new")
         try:
-            with open(tmp, "wb") as fh:
-                fh.write(json.dumps(head, ensure_ascii=False).encode("utf-8") + b"\n")
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, path)
-            _sync_dir(path.parent)
+            atomic_write(path, json.dumps(head, ensure_ascii=False).encode("utf-8") + b"\n")
             return cls(path, open(path, "ab"))
         except OSError as exc:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
             raise JournalWriteError(
                 f"{path}: cannot create the journal: {exc.strerror or exc}"
             ) from exc

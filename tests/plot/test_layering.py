@@ -1,9 +1,9 @@
 """``apygis.plot`` sits above the model: it imports only the layers below it.
 
 Allowed: :mod:`apygis.model`, :mod:`apygis.errors`, :mod:`apygis.progress`,
-the shared file helpers :mod:`apygis.formats._io` (the one atomic write, the
-guarded read) and itself. :mod:`apygis.model` and :mod:`apygis.orient` must
-not import :mod:`apygis.plot`. Imports inside functions count too.
+the shared file helpers :mod:`apygis.fileio` (the one atomic write, the
+guarded read) and :mod:`apygis.formats._io`, and itself. :mod:`apygis.model`
+and :mod:`apygis.orient` must not import :mod:`apygis.plot`. Imports inside functions count too.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ PLOT_MAY_IMPORT = (
     "apygis.errors",
     "apygis.progress",
     "apygis.formats._io",
+    "apygis.fileio",
 )
 
 
