@@ -65,9 +65,10 @@ from apygis.formats._io import (
     stamp_path,
 )
 from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows
+from apygis.formats._text import digit_columns, esri_wkt, put_right
 from apygis.model import topology
-from apygis.model.polylines import add_lines, export_lines, tolerance_in_crs
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text
+from apygis.model.polylines import add_lines, export_lines, tolerance_in_crs
 from apygis.model.records import MAX_CODE, SYMBOL_DTYPE, TEXT_DTYPE
 
 __all__ = [
@@ -118,12 +119,7 @@ def _int_column(values: np.ndarray) -> np.ndarray:
     nd = max(1, len(str(int(a.max()))))
     width = nd + 1  # room for a sign
     out = np.full((n, width), _SP, np.uint8)
-    power = np.arange(nd - 1, -1, -1, dtype=np.int64)
-    pw = 10**power
-    show = (a[:, None] >= pw[None, :]) | (power[None, :] == 0)
-    out[:, 1:] = np.where(show, _ZERO + (a[:, None] // pw[None, :]) % 10, _SP)
-    neg = np.flatnonzero(v < 0)
-    out[neg, nd - show[neg].sum(axis=1)] = _MINUS
+    put_right(out, 0, width, a, v < 0)
     return out
 
 
@@ -150,16 +146,10 @@ def _fixed_column(values: np.ndarray, decimals: int, what: str = "coordinate") -
     nint = max(1, len(str(int(ip.max()))))
     width = 1 + nint + (1 + decimals if decimals else 0)
     out = np.full((n, width), _SP, np.uint8)
-    power = np.arange(nint - 1, -1, -1, dtype=np.int64)
-    pw = 10**power
-    show = (ip[:, None] >= pw[None, :]) | (power[None, :] == 0)
-    out[:, 1 : 1 + nint] = np.where(show, _ZERO + (ip[:, None] // pw[None, :]) % 10, _SP)
-    neg = np.flatnonzero((v < 0) & (a != 0))
-    out[neg, nint - show[neg].sum(axis=1)] = _MINUS
+    put_right(out, 0, 1 + nint, ip, (v < 0) & (a != 0))
     if decimals:
         out[:, 1 + nint] = _DOT
-        dpw = 10 ** np.arange(decimals - 1, -1, -1, dtype=np.int64)
-        out[:, 2 + nint :] = _ZERO + (fp[:, None] // dpw[None, :]) % 10
+        out[:, 2 + nint :] = digit_columns(fp, decimals)
     return out
 
 
@@ -344,13 +334,7 @@ def _layer_contents(layer: Layer, base: Path, dims: int, decimals: int) -> dict[
 
 
 def _prj_text(crs) -> bytes:
-    try:
-        wkt = crs.to_wkt("WKT1_ESRI")
-    except Exception:  # pyproj raises CRSError or returns None for CRSs ESRI WKT cannot hold
-        wkt = None
-    if not wkt:
-        wkt = crs.to_wkt("WKT1_GDAL") or crs.to_wkt()
-    return wkt.encode("utf-8")
+    return esri_wkt(crs).encode("utf-8")
 
 
 def _check_options(dims: int, decimals: int) -> None:

@@ -33,6 +33,7 @@ from apygis.formats import Driver
 from apygis.formats._apycommon import check_layer_for_apy, cm_to_m, m_to_cm
 from apygis.formats._io import atomic_write_many, check_resolution, read_bytes
 from apygis.formats._readguard import ascii_int, check_coords
+from apygis.formats._text import digit_columns, put_right
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
 from apygis.model.records import LINE_DTYPE, NO_REF, REF_FIELDS, SYMBOL_DTYPE, TEXT_DTYPE
 
@@ -62,8 +63,7 @@ _SP, _DOT, _MINUS, _ZERO = 32, 46, 45, 48
 
 def _put_int(out: np.ndarray, col: int, width: int, values: np.ndarray) -> None:
     """Zero-padded unsigned integers of ``width`` digits."""
-    pw = 10 ** np.arange(width - 1, -1, -1, dtype=np.int64)
-    out[:, col : col + width] = _ZERO + (values[:, None] // pw[None, :]) % 10
+    out[:, col : col + width] = digit_columns(values, width)
 
 
 def _put_ref(out: np.ndarray, col: int, values: np.ndarray) -> None:
@@ -73,19 +73,11 @@ def _put_ref(out: np.ndarray, col: int, values: np.ndarray) -> None:
 
 def _put_dec(out: np.ndarray, col: int, width: int, cm: np.ndarray) -> None:
     """Right-aligned metres with two decimals from integer centimetres."""
-    f = out[:, col : col + width]
     a = np.abs(cm)
-    f[:, width - 1] = _ZERO + a % 10
-    f[:, width - 2] = _ZERO + (a // 10) % 10
-    f[:, width - 3] = _DOT
     nint = width - 3  # columns for the sign and the integer digits
-    power = np.arange(nint - 1, -1, -1, dtype=np.int64)
-    pw = 10**power
-    ip = a // 100
-    show = (ip[:, None] >= pw[None, :]) | (power[None, :] == 0)
-    f[:, :nint] = np.where(show, _ZERO + (ip[:, None] // pw[None, :]) % 10, _SP)
-    neg = np.flatnonzero(cm < 0)
-    f[neg, nint - 1 - show[neg].sum(axis=1)] = _MINUS
+    put_right(out, col, nint, a // 100, cm < 0)
+    out[:, col + nint] = _DOT
+    out[:, col + nint + 1 : col + width] = digit_columns(a % 100, 2)
 
 
 def _encode_rows(table: np.ndarray, cols, width: int) -> bytes:

@@ -44,9 +44,10 @@ from apygis.errors import DriverError, FormatError, RecordError, ValueRangeError
 from apygis.formats import Driver
 from apygis.formats._io import atomic_write_many, check_resolution, read_bytes, significant_step
 from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows, exact, loads_json
+from apygis.formats._text import digit_columns, esri_wkt, put_right
 from apygis.model import topology
-from apygis.model.polylines import add_lines, export_lines
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
+from apygis.model.polylines import add_lines, export_lines
 from apygis.model.records import LINE_DTYPE, MAX_CODE, NO_REF, SYMBOL_DTYPE, TABLES, TEXT_DTYPE
 
 __all__ = [
@@ -101,13 +102,7 @@ def _int_field(values, width: int, what: str) -> np.ndarray:
     top = int(a.max())
     if top >= 10 ** (width - 1):
         raise ValueRangeError(f"{what} {int(v[np.argmax(a)])} does not fit {width} columns")
-    nd = len(str(top))
-    power = np.arange(nd - 1, -1, -1, dtype=np.int64)
-    pw = 10**power
-    show = (a[:, None] >= pw[None, :]) | (power[None, :] == 0)
-    out[:, width - nd :] = np.where(show, 48 + (a[:, None] // pw[None, :]) % 10, _SP)
-    neg = np.flatnonzero(v < 0)
-    out[neg, width - 1 - show[neg].sum(axis=1)] = 45
+    put_right(out, 0, width, a, v < 0)
     return out
 
 
@@ -143,8 +138,7 @@ def _real_field(values, decimals: int, what: str = "coordinate") -> np.ndarray:
     e[zero] = 0
     if (e > 99).any():
         raise ValueRangeError(f"a {what} of {a.max():.6g} exceeds the E00 range (1E+99)")
-    pw = 10 ** np.arange(sig - 1, -1, -1, dtype=np.int64)
-    digits = 48 + (m[:, None] // pw[None, :]) % 10
+    digits = digit_columns(m, sig)
     out[:, 0] = np.where((v < 0) & ~zero, 45, _SP)
     out[:, 1] = digits[:, 0]
     out[:, 2] = 46
@@ -307,13 +301,7 @@ def _meta_table(map_: MapFile, cover: str) -> bytes:
 
 
 def _prj_lines(crs) -> list[str]:
-    try:
-        wkt = crs.to_wkt("WKT1_ESRI")
-    except Exception:  # pyproj: CRSError, or None, where ESRI WKT cannot hold the CRS
-        wkt = None
-    if not wkt:
-        wkt = crs.to_wkt("WKT1_GDAL") or crs.to_wkt()
-    wkt = "".join(wkt.split("\n"))
+    wkt = "".join(esri_wkt(crs).split("\n"))
     try:
         wkt.encode("ascii")
     except UnicodeEncodeError:
