@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from apygis.errors import CapacityError, ValueRangeError
-from apygis.model.records import APY_CAPACITY, APY_MAX_NUM, NO_REF, REF_FIELDS
+from apygis.model.records import APY_CAPACITY, APY_MAX_NUM, NO_REF, REF_FIELDS, TABLE_WORDS
 
 __all__ = [
     "MAX_XY_CM",
@@ -23,8 +23,6 @@ __all__ = [
 
 MAX_XY_CM = 999_999_999
 MAX_Z_CM = 999_999
-
-_WORD = {"symbols": "symbol", "line_points": "line point", "texts": "text"}
 
 
 def m_to_cm(values: np.ndarray) -> np.ndarray:
@@ -60,7 +58,7 @@ def check_layer_for_apy(layer, path=None) -> None:
         t = layer.table(table)
         if len(t) == 0:
             continue
-        word = _WORD[table]
+        word = TABLE_WORDS[table]
         _range(
             t,
             "num",

@@ -36,6 +36,7 @@ __all__ = [
     "REF_FIELDS",
     "SYMBOL_DTYPE",
     "TABLES",
+    "TABLE_WORDS",
     "TEXT_DTYPE",
     "TEXT_LEN",
     "Table",
@@ -73,6 +74,8 @@ TEXT_DTYPE = np.dtype(
 )
 
 TABLES = {"symbols": SYMBOL_DTYPE, "line_points": LINE_DTYPE, "texts": TEXT_DTYPE}
+TABLE_WORDS = {"symbols": "symbol", "line_points": "line point", "texts": "text"}
+"""A record of each table in words, for messages (``"line point 12"``)."""
 """Table name -> dtype, in the order the native formats store them."""
 
 

@@ -30,13 +30,11 @@ import numpy as np
 
 from apygis.errors import CRSError
 from apygis.model.map import Layer, MapFile, crs_string
-from apygis.model.records import TABLES
+from apygis.model.records import TABLE_WORDS, TABLES
 
 __all__ = ["CRSError", "has_height", "reproject"]
 
 log = logging.getLogger(__name__)
-
-_WORD = {"symbols": "symbol", "line_points": "line point", "texts": "text"}
 
 
 def _crs(value, what: str):
@@ -138,7 +136,7 @@ def reproject(map_: MapFile, to_crs) -> MapFile:
         if bad[pos : pos + n].any():
             i = int(np.flatnonzero(bad[pos : pos + n])[0])
             raise CRSError(
-                f"layer {lay.ext}: {_WORD[name]} {t['num'][i]} at "
+                f"layer {lay.ext}: {TABLE_WORDS[name]} {t['num'][i]} at "
                 f"({t['x'][i]:.3f}, {t['y'][i]:.3f}) cannot be transformed from "
                 f"{crs_string(src)} to {crs_string(dst)} (outside the area of either CRS?)"
             )

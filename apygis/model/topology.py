@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from apygis.errors import RecordNotFoundError, TopologyError
-from apygis.model.records import NO_REF, REF_FIELDS
+from apygis.model.records import NO_REF, REF_FIELDS, TABLE_WORDS
 
 __all__ = [
     "DHI",
@@ -267,13 +267,10 @@ class Issue:
         return f"{self.severity}: {self.message}"
 
 
-_TABLE_WORD = {"symbols": "symbol", "line_points": "line point", "texts": "text"}
-
-
 def validate_numbers(table: str, nums: np.ndarray) -> list[Issue]:
     """Duplicate and negative point numbers in one table."""
     out = []
-    word = _TABLE_WORD[table]
+    word = TABLE_WORDS[table]
     uniq, counts = np.unique(nums, return_counts=True)
     for num, c in zip(uniq[counts > 1], counts[counts > 1], strict=True):
         out.append(

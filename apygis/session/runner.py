@@ -59,6 +59,7 @@ from apygis.compile.events import (
 from apygis.errors import ApygisError, OrientationError
 from apygis.instrument.pad import BUTTONS
 from apygis.model.map import MapFile
+from apygis.model.records import TABLE_WORDS
 from apygis.model.topology import margin_mask
 from apygis.session.decoder import ReportDecoder, decode_typed
 from apygis.session.journal import (
@@ -86,7 +87,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-_WORD = {"symbols": "symbol", "line_points": "line point", "texts": "text"}
 _BUTTON_NAMES = frozenset(BUTTONS.values())
 
 
@@ -512,7 +512,7 @@ def _entry_line(n: int, map_id: str, e) -> str:
         what = "closing the line" if e.how == "closed" else "a branch"
         return f"entry {n}: line point {e.num} joined to {e.target} in {map_id}.{e.layer} ({what})"
     verb = "added" if isinstance(e, Added) else "deleted"
-    return f"entry {n}: {_WORD[e.table]} {e.num} {verb} in {map_id}.{e.layer}"
+    return f"entry {n}: {TABLE_WORDS[e.table]} {e.num} {verb} in {map_id}.{e.layer}"
 
 
 def run_tablet_stream(session: Session, chunks: Iterable, parser, decoder: ReportDecoder) -> None:
