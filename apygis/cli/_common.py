@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import sys
+from typing import TextIO, cast
 
 import click
 
@@ -41,7 +42,7 @@ def progress_bar(length: int, label: str):
     return click.progressbar(
         length=length,
         label=label,
-        file=sys.stderr if sys.stderr.isatty() else _Null(),
+        file=sys.stderr if sys.stderr.isatty() else cast(TextIO, _Null()),
     )
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from typing import cast
 
 import click
 
@@ -91,7 +92,7 @@ def convert(paths, to_format, driver, src_driver, to_crs, layer_map, snap, jobs,
 
             res = convert_file(sources[0], dst, driver=driver, progress=advance, **common)
         if not res.ok:
-            raise click.ClickException(res.error)
+            raise click.ClickException(cast(str, res.error))  # set when not ok
         click.echo(
             f"{res.source} -> {_outputs(res.outputs)}: {res.layers} layers, {res.records} records"
         )

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import cast
+
 import click
 
 from apygis.cli._common import run_guarded
@@ -162,7 +164,7 @@ def session(
     config = TabletConfig(counts_per_mm=float(meta.get("counts_per_mm", 40.0)))
     parser = decoder = None
     if not recover_only:
-        parser = make_parser(protocol, config)
+        parser = make_parser(cast(str, protocol), config)  # set by --tablet or --replay
         if pad:
             from apygis.instrument.pad import load_pad
 
@@ -213,7 +215,9 @@ def session(
     try:
         if not recover_only and not sess.finished:
             if replay:
-                run_tablet_stream(sess, Replayer(replay, realtime=realtime), parser, decoder)
+                run_tablet_stream(
+                    sess, Replayer(replay, realtime=realtime), parser, cast(ReportDecoder, decoder)
+                )
             else:
                 _live(sess, port, url, parser, decoder, record, protocol, config)
     except BaseException:

@@ -9,6 +9,7 @@ set is shown, and ``set`` creates the file from it on the first change.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import cast
 
 import click
 
@@ -39,7 +40,7 @@ class _Cell(click.ParamType):
         nums = [ascii_int(p, max_digits=2) for p in parts]  # no '²', no 5000-digit strings
         if len(parts) != 2 or None in nums:
             self.fail(f"{value!r} is not ROW,COL (two whole numbers 1-15, e.g. 8,8)", param, ctx)
-        row, col = nums
+        row, col = cast(list[int], nums)  # no None: checked above
         if not (1 <= row <= SIZE and 1 <= col <= SIZE):
             self.fail(
                 f"{value!r} is off the 15x15 grid; rows and columns run from 1 to 15",

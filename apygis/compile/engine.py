@@ -76,7 +76,7 @@ import enum
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, TypeVar, cast
 
 import numpy as np
 
@@ -322,6 +322,8 @@ HINTS: dict[Mode, str] = {
 
 # --------------------------------------------------------------------------- engine
 
+_S = TypeVar("_S")
+
 
 class Engine:
     """The compilation state machine over one map.
@@ -408,12 +410,16 @@ class Engine:
             raise TypeError(f"mode {mode} holds a {MODE_STATE[mode].__name__}, not {state!r}")
         self.mode, self.state = mode, state
 
+    def _st(self, cls: type[_S]) -> _S:
+        """The current mode's state, as the ``MODE_STATE`` class of the mode that needs it."""
+        return cast(_S, self.state)
+
     def _line_progress(self) -> LineProgress:
-        return self.state.progress() if self.mode is Mode.LINE else self.line_aside
+        return self._st(Line).progress() if self.mode is Mode.LINE else self.line_aside
 
     def _set_line_progress(self, p: LineProgress) -> None:
         if self.mode is Mode.LINE:
-            self.state.restore(p)
+            self._st(Line).restore(p)
         else:
             self.line_aside = p
 
@@ -454,6 +460,10 @@ class Engine:
             out.append(Message(f"layer {self.layer_ext}: {table.replace('_', ' ')} full ({cap})"))
             return False
         return True
+
+    def _marked(self) -> tuple[float, float, float]:
+        """:meth:`mark` where the caller knows the mark is placed (see :meth:`_need_mark`)."""
+        return cast(tuple[float, float, float], self.mark())
 
     def _need_mark(self, out: list) -> bool:
         if self.mark_xy is None:
@@ -507,7 +517,7 @@ class Engine:
             self._on_mark(event, out)
             return out
         if isinstance(event, Keys):
-            self._on_keys(event.text, out)
+            self._on_keys(cast(str, event.text), out)  # decoded by the session
             out.append(self._status())
             return out
         b = event.button
@@ -541,7 +551,7 @@ class Engine:
     def _on_mark(self, ev: Mark, out: list) -> None:
         self.mark_xy = self.geometry.ground(ev.x_mm, ev.y_mm)
         self._plates(out)
-        if self.mode is Mode.LINE and self.state.sampling:
+        if self.mode is Mode.LINE and self._st(Line).sampling:
             self._sample(out)
 
     def _plates(self, out: list) -> None:
@@ -566,7 +576,7 @@ class Engine:
 
     def _on_keys(self, text: str, out: list) -> None:
         if self.mode is Mode.TEXT:
-            self.state.text = text
+            self._st(Text).text = text
             out.append(Message(f"text {text!r}: place the mark and ENTER"))
         elif self.mode in (Mode.PROCEED_VALUE, Mode.LAYER_CHOOSE) or self.buf == "":
             self.buf = text.strip()
@@ -668,8 +678,8 @@ class Engine:
             if not (self._need_mark(out) and self._capacity_ok("symbols", out)):
                 return
             self._snapshot()
-            X, Y, Z = self.mark()
-            num = self.layer.add_symbol(X, Y, Z, self.state.code)
+            X, Y, Z = self._marked()
+            num = self.layer.add_symbol(X, Y, Z, self._st(SymbolPlace).code)
             out.append(Added(self.layer_ext, "symbols", num))
             self._entry(out)
         elif b == "DELETE":
@@ -685,9 +695,10 @@ class Engine:
             if self.buf == "":
                 decimals = 2
             else:
-                decimals = self._take_number(out, 0, 2, "decimals")
-                if decimals is None:
+                taken = self._take_number(out, 0, 2, "decimals")
+                if taken is None:
                     return
+                decimals = taken
             self.buf = ""
             self._enter(Mode.LINE_CODE, LineCode(decimals))
             out.append(Message(f"heights rounded down to {decimals} decimals; line code, ENTER"))
@@ -700,17 +711,17 @@ class Engine:
             if code is not None:
                 sampling = self.line_aside[2]
                 self.line_aside = _NO_LINE
-                self._enter(Mode.LINE, Line(code, self.state.decimals, sampling=sampling))
+                self._enter(Mode.LINE, Line(code, self._st(LineCode).decimals, sampling=sampling))
                 out.append(Message(f"line code {code:02d}: ENTER points, SEARCH, SAMPLE, PROCEED"))
         elif not self._proceed_to_menu(b, out):
             self._ignored(b, out)
 
     def _line_z(self, z: float) -> float:
-        f = 10.0**self.state.decimals
+        f = 10.0 ** self._st(Line).decimals
         return math.floor(round(z * f, 6)) / f
 
     def _add_point(self, xyz, out: list) -> int | None:
-        line: Line = self.state
+        line = self._st(Line)
         if not self._capacity_ok("line_points", out):
             return None
         X, Y, Z = xyz
@@ -730,11 +741,11 @@ class Engine:
         return num
 
     def _mode_line(self, b: str, out: list) -> None:
-        line: Line = self.state
+        line = self._st(Line)
         if b == "ENTER":
             if self._need_mark(out) and self._capacity_ok("line_points", out):
                 self._snapshot()
-                self._add_point(self.mark(), out)
+                self._add_point(self._marked(), out)
         elif b == "SEARCH":
             self._search(out)
         elif b == "SAMPLE":
@@ -751,7 +762,7 @@ class Engine:
             self._ignored(b, out)
 
     def _search(self, out: list) -> None:
-        line: Line = self.state
+        line = self._st(Line)
         hit = self._nearest("line_points")
         if hit is None:
             out.append(Message(f"SEARCH: no line point within {self.snap_m:.2f} m"))
@@ -777,7 +788,7 @@ class Engine:
         line.reset()
 
     def _sample(self, out: list) -> None:
-        line: Line = self.state
+        line = self._st(Line)
         if line.end is None:
             return
         lp = self.layer.line_points
@@ -787,7 +798,7 @@ class Engine:
             return
         row_a = lp[lp["num"] == back][0]
         ax, ay, bx, by = row_a["x"], row_a["y"], row_b["x"], row_b["y"]
-        mx, my, mz = self.mark()
+        mx, my, mz = self._marked()
         length = math.hypot(bx - ax, by - ay)
         if length == 0:
             return
@@ -807,14 +818,14 @@ class Engine:
 
     def _mode_text(self, b: str, out: list) -> None:
         if b == "ENTER":
-            text = self.state.text
+            text = self._st(Text).text
             if text is None:
                 out.append(Message("type the text first"))
                 return
             if not (self._need_mark(out) and self._capacity_ok("texts", out)):
                 return
             self._snapshot()
-            X, Y, Z = self.mark()
+            X, Y, Z = self._marked()
             num = self.layer.add_text(X, Y, Z, text)
             out.append(Added(self.layer_ext, "texts", num))
             self._entry(out)
@@ -833,7 +844,7 @@ class Engine:
                 return
             a, b2 = seg
             self._snapshot()
-            X, Y, Z = self.mark()
+            X, Y, Z = self._marked()
             num = self.layer.split(a, b2, (X, Y, Z))
             out.append(Added(self.layer_ext, "line_points", num))
             out.append(Message(f"LS: point {num} between {a} and {b2}"))
@@ -862,7 +873,7 @@ class Engine:
 
     def _mode_area(self, b: str, out: list) -> None:
         if b == "ENTER":
-            pick: AreaPick = self.state
+            pick = self._st(AreaPick)
             hit = self._nearest("line_points")
             if hit is None:
                 out.append(Message(f"AREA: no line point within {self.snap_m:.2f} m"))
@@ -890,7 +901,7 @@ class Engine:
 
     def _mode_dhi(self, b: str, out: list) -> None:
         if b == "ENTER":
-            pick: DhiPick = self.state
+            pick = self._st(DhiPick)
             if not self._need_mark(out):
                 return
             if pick.first is None:
@@ -922,7 +933,7 @@ class Engine:
 
     def _mode_delete_place(self, b: str, out: list) -> None:
         if b == "ENTER":
-            table = self.state.table
+            table = self._st(DeletePlace).table
             hit = self._nearest(table)
             if hit is None:
                 out.append(Message(f"DELETE: nothing within {self.snap_m:.2f} m"))
@@ -991,7 +1002,7 @@ class Engine:
         except ValueError:
             v = float("nan")
         self.buf = ""
-        item = self.state.item
+        item = self._st(ProceedValue).item
         lo, hi = DISPLAY_SCALE_RANGE if item == 1 else CROSSHAIR_SCALE_RANGE
         if not lo <= v <= hi:
             out.append(Message(f"a value from {lo} to {hi}, please"))

@@ -85,9 +85,13 @@ class Press:
 
 @dataclass(frozen=True)
 class Keys:
-    """Text typed on the keyboard."""
+    """Text typed on the keyboard.
 
-    text: str
+    Bytes (or a str with ``surrogateescape`` characters) only on the way into
+    ``Session.handle``, which decodes them: the engine sees a str.
+    """
+
+    text: str | bytes
 
 
 Event = Mark | Press | Keys

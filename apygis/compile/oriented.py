@@ -15,9 +15,14 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from apygis.errors import OrientationError
+
+if TYPE_CHECKING:
+    from apygis.orient.realtime import RealtimeLoop
 
 __all__ = ["OrientedGeometry"]
 
@@ -35,7 +40,7 @@ class OrientedGeometry:
         self.orientation = orientation
         self._t = orientation.map_transform
         self._hc = orientation.height_correction
-        self.loop = None
+        self.loop: RealtimeLoop | None = None
         self.height_step_m = float(default_step_m)
         photos = orientation.photos
         if len(photos) >= 2:
@@ -45,14 +50,15 @@ class OrientedGeometry:
             except KeyError:
                 ml = mr = None
             if ml is not None:
-                self.loop = RealtimeLoop(photos[0], photos[1], ml, mr)
-                self.height_step_m = self._plate_height_step(photos[0], photos[1], ml)
+                loop = RealtimeLoop(photos[0], photos[1], ml, mr)
+                self.loop = loop
+                self.height_step_m = self._plate_height_step(loop, photos[0], photos[1], ml)
 
-    def _plate_height_step(self, left, right, motors) -> float:
+    def _plate_height_step(self, loop: RealtimeLoop, left, right, motors) -> float:
         el, er = left.exterior, right.exterior
         H = left.interior.focal_mm / abs(left.sx_mm_per_m)
         X, Y, Z = (el.Xo + er.Xo) / 2, (el.Yo + er.Yo) / 2, el.Zo - H
-        a, b = self.loop.update(X, Y, Z), self.loop.update(X, Y, Z + 1.0)
+        a, b = loop.update(X, Y, Z), loop.update(X, Y, Z + 1.0)
         dp_mm_per_m = abs((b.px_left - b.px_right) - (a.px_left - a.px_right))
         if not dp_mm_per_m > 0:
             return self.height_step_m

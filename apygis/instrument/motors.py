@@ -43,6 +43,7 @@ import collections
 import contextlib
 import logging
 import time
+from typing import cast
 
 from apygis.errors import MotorError, ProtocolError
 from apygis.instrument.grbl import (
@@ -383,7 +384,7 @@ class MotorController:
     def _raise_failed(self) -> None:
         if self._failed:
             entry = self._failed.popleft()
-            raise entry.error
+            raise cast(MotorError, entry.error)  # a failed entry has its error
 
     def _readline(self, deadline: float | None) -> str | None:
         """The next line from the controller, or None at the deadline (None: no wait)."""

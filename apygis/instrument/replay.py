@@ -44,6 +44,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeGuard
 
 from apygis.errors import FileOverwriteError, FormatError, InstrumentError
 
@@ -254,7 +255,7 @@ def _bad(path, lineno: int, message: str) -> FormatError:
     return FormatError(message, path, f"line {lineno}")
 
 
-def _is_number(v) -> bool:
+def _is_number(v: object) -> TypeGuard[int | float]:
     return isinstance(v, int | float) and not isinstance(v, bool)
 
 

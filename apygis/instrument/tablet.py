@@ -76,7 +76,7 @@ import logging
 import math
 import re
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import ClassVar, cast
 
 from apygis.errors import ProtocolError
 
@@ -222,7 +222,7 @@ def _is_count(v) -> bool:
         isinstance(v, numbers.Real)
         and not isinstance(v, bool)
         and math.isfinite(v)
-        and abs(v) <= 1 << 62
+        and abs(cast(float, v)) <= 1 << 62  # a Real, not rounded by float()
     )
 
 
@@ -456,7 +456,7 @@ class _BinaryParser(Parser):
             start = 0
         else:
             buf = bytes(data)
-            start = _HEADLESS.match(buf).end()
+            start = cast("re.Match[bytes]", _HEADLESS.match(buf)).end()  # matches b"" at least
             if start:
                 self._discard(start)
         self._pending = b""

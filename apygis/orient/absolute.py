@@ -189,7 +189,7 @@ def similarity_closed_form(model, ground) -> Similarity3D:
     scale = float(np.trace(np.diag(S) @ D) / (mc * mc).sum())
     t = gm - scale * R @ mm
     w, p, k = angles_from_matrix(R)
-    return Similarity3D(*t, scale, w, p, k)
+    return Similarity3D(t[0], t[1], t[2], scale, w, p, k)
 
 
 def absolute_orientation(
@@ -271,7 +271,7 @@ def absolute_orientation(
     R = rotation_matrix(x[4], x[5], x[6])
     t = x[:3] + gm - x[3] * R @ mm
     w, p, k = angles_from_matrix(R)
-    S = Similarity3D(*t, x[3], w, p, k)
+    S = Similarity3D(t[0], t[1], t[2], x[3], w, p, k)
     # covariance of (t, scale, angles) from that of (t', scale, angles)
     T = np.eye(7)
     T[:3, 3] = -R @ mm

@@ -165,7 +165,7 @@ def fit_height_correction(xy, dz) -> HeightCorrectionFit:
             "(collinear, or on two axis-parallel lines); spread them over the model"
         )
     coef, *_ = np.linalg.lstsq(A, z, rcond=None)
-    corr = HeightCorrection(*coef, Xc=Xc, Yc=Yc, scale_m=scale)
+    corr = HeightCorrection(coef[0], coef[1], coef[2], coef[3], Xc=Xc, Yc=Yc, scale_m=scale)
     res = A @ coef - z
     dof = len(z) - 4
     sigma0 = float(np.sqrt(res @ res / dof)) if dof > 0 else math.nan

@@ -52,12 +52,12 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from apygis.errors import DegenerateGeometryError, MeasurementError, OrientationError
 from apygis.orient._fields import finite_fields
-from apygis.orient.lsq import gauss_newton
 from apygis.orient.collinearity import (
     ExteriorOrientation,
     InteriorOrientation,
@@ -66,6 +66,7 @@ from apygis.orient.collinearity import (
     parallax,
     parallax_jacobian,
 )
+from apygis.orient.lsq import gauss_newton
 
 __all__ = [
     "NO_CONTROL_SIN",
@@ -137,7 +138,7 @@ class PhotoOrientation:
 
     def to_dict(self) -> dict:
         """JSON-ready dict: ``id``, the interior and exterior fields, ``sx/sy_mm_per_m``."""
-        d = {"id": self.photo_id}
+        d: dict[str, Any] = {"id": self.photo_id}
         d.update(self.interior.to_dict())
         d.update(self.exterior.to_dict())
         d["sx_mm_per_m"] = self.sx_mm_per_m
@@ -457,8 +458,8 @@ def approximate_orientation(
     if Zo is None:
         if scale_number is not None:
             Zo = c_m * float(scale_number) + float(mean_height)
-        elif sx_mm_per_m or sy_mm_per_m:
-            s = abs(sx_mm_per_m or sy_mm_per_m)
+        elif given := sx_mm_per_m or sy_mm_per_m:
+            s = abs(given)
             Zo = interior.focal_mm / s + float(mean_height)
         else:
             raise OrientationError(
@@ -468,11 +469,12 @@ def approximate_orientation(
     H = float(Zo) - float(mean_height)
     if not H > 0:
         raise OrientationError(f"photo {photo_id}: Zo must lie above the mean height")
-    if sx_mm_per_m is None and sy_mm_per_m is None:
-        sign = 1.0 if kappa_rad is None or math.cos(kappa_rad) < 0 else -1.0
-        sx_mm_per_m = sy_mm_per_m = sign * interior.focal_mm / H
-    elif sx_mm_per_m is None:
-        sx_mm_per_m = sy_mm_per_m
+    if sx_mm_per_m is None:
+        if sy_mm_per_m is None:
+            sign = 1.0 if kappa_rad is None or math.cos(kappa_rad) < 0 else -1.0
+            sx_mm_per_m = sy_mm_per_m = sign * interior.focal_mm / H
+        else:
+            sx_mm_per_m = sy_mm_per_m
     elif sy_mm_per_m is None:
         sy_mm_per_m = sx_mm_per_m
     if kappa_rad is None:

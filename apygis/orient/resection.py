@@ -31,7 +31,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from apygis.errors import DegenerateGeometryError, MeasurementError, OrientationError
-from apygis.orient.lsq import gauss_newton
 from apygis.orient.collinearity import (
     EO_PARAMETERS,
     ExteriorOrientation,
@@ -39,6 +38,7 @@ from apygis.orient.collinearity import (
     collinearity_jacobian,
     depth,
 )
+from apygis.orient.lsq import gauss_newton
 from apygis.orient.rotation import angles_from_matrix, nearest_rotation
 
 __all__ = ["ResectionResult", "dlt_approximation", "resect", "similarity_approximation"]
@@ -165,7 +165,7 @@ def dlt_approximation(ground, photo_mm, interior: InteriorOrientation) -> Exteri
         raise DegenerateGeometryError("the DLT matrix is singular")
     R = nearest_rotation((Am / mu).T)
     w, ph, k = angles_from_matrix(R)
-    return ExteriorOrientation(*C, w, ph, k)
+    return ExteriorOrientation(C[0], C[1], C[2], w, ph, k)
 
 
 def resect(

@@ -43,7 +43,8 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, fields
+from dataclasses import Field, dataclass, fields
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -91,6 +92,13 @@ class _Transform:
     """Shared behaviour of the transform value types."""
 
     model: str = ""
+
+    if TYPE_CHECKING:  # every transform is a dataclass with these (see the subclasses)
+        __dataclass_fields__: ClassVar[dict[str, Field[Any]]]
+
+        def forward(self, points) -> np.ndarray: ...
+
+        def jacobian(self, points) -> np.ndarray: ...
 
     def __post_init__(self):
         names = [f.name for f in fields(self)]
@@ -293,7 +301,11 @@ class BilinearTransform(_Transform):
         raise ConvergenceError(f"bilinear inverse did not converge in {max_iter} Newton iterations")
 
 
-_TYPES = {"conformal": ConformalTransform, "affine": AffineTransform, "bilinear": BilinearTransform}
+_TYPES: dict[str, type[_Transform]] = {
+    "conformal": ConformalTransform,
+    "affine": AffineTransform,
+    "bilinear": BilinearTransform,
+}
 
 
 def transform_from_dict(d: Mapping):
@@ -359,7 +371,7 @@ class MapOrientation:
         flag tells whether the best affine fit would.
     """
 
-    transform: object
+    transform: _Transform
     ids: tuple
     tablet_mm: np.ndarray
     ground: np.ndarray
@@ -432,7 +444,7 @@ def _denormalise(model: str, p: np.ndarray, xm: float, ym: float, s: float, Gx: 
         c0 = G + k0 - k1 * xm / s - k2 * ym / s + c3 * xm * ym
         return c0, c1, c2, c3
 
-    return BilinearTransform(*bil(*p[:4], Gx), *bil(*p[4:], Gy))
+    return BilinearTransform(*bil(p[0], p[1], p[2], p[3], Gx), *bil(p[4], p[5], p[6], p[7], Gy))
 
 
 def fit_map_transform(

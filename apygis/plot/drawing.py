@@ -36,7 +36,7 @@ import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -170,7 +170,7 @@ class Drawing:
         """The pen numbers the items use, ascending."""
         return sorted({it.pen for it in self.items})
 
-    def count(self, kind: type, role: str | None = None) -> int:
+    def count(self, kind: type[Any], role: str | None = None) -> int:
         """Number of items of class ``kind`` (and ``role``)."""
         return sum(1 for it in self.items if isinstance(it, kind) and role in (None, it.role))
 
@@ -478,7 +478,7 @@ def build_drawing(
         pens=dict(pdef.pens),
         map_id=m.id,
     )
-    stats = dict.fromkeys(
+    stats: dict[str, Any] = dict.fromkeys(
         (
             "lines",
             "line_pieces",

@@ -48,6 +48,7 @@ import math
 import unicodedata
 
 import numpy as np
+import numpy.typing as npt
 
 from apygis.plot.drawing import Drawing, FilledRects, PaperLine, PaperText
 
@@ -107,7 +108,7 @@ def hatch_strokes(rects, pen_width_mm: float) -> np.ndarray:
     return np.array(out, dtype=float).reshape(-1, 2, 2)
 
 
-def _pu(xy: np.ndarray) -> np.ndarray:
+def _pu(xy: npt.ArrayLike) -> np.ndarray:
     return np.rint(np.asarray(xy, dtype=float) * UNITS_PER_MM).astype(np.int64)
 
 

@@ -217,9 +217,9 @@ def drawing_pdf(d: Drawing, compress: bool = True) -> bytes:
             )
     out.append("Q\n")
     content = "".join(out).encode("ascii")
-    size = (d.width_mm * PT_PER_MM, d.height_mm * PT_PER_MM)
+    page = (d.width_mm * PT_PER_MM, d.height_mm * PT_PER_MM)
     title = f"{d.map_id} 1:{d.scale}" if d.map_id else f"plot 1:{d.scale}"
-    return pdf_document([(content, size)], {"F1": "Helvetica"}, title=title, compress=compress)
+    return pdf_document([(content, page)], {"F1": "Helvetica"}, title=title, compress=compress)
 
 
 # --------------------------------------------------------------------------- text pages

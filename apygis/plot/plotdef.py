@@ -442,12 +442,13 @@ def parse_plotdef(text: str | bytes, path=None) -> PlotterDef:
         defined; the message names the line.
     """
     if isinstance(text, bytes | bytearray):
+        raw = bytes(text)
         try:
-            text = bytes(text).decode("utf-8")
+            text = raw.decode("utf-8")
         except UnicodeDecodeError as exc:
-            line = bytes(text).count(b"\n", 0, exc.start) + 1
+            bad = raw.count(b"\n", 0, exc.start) + 1
             raise FormatError(
-                "not UTF-8 text; a plotter definition is UTF-8", path=path, record=f"line {line}"
+                "not UTF-8 text; a plotter definition is UTF-8", path=path, record=f"line {bad}"
             ) from None
     if text.startswith("\ufeff"):
         text = text[1:]

@@ -83,10 +83,10 @@ def drawing_svg(d: Drawing) -> bytes:
             pts = np.vstack([it.points, it.points[:1]]) if it.closed else it.points
             coords = " ".join(f"{_n(x)},{_n(H - y)}" for x, y in pts.tolist())
             # presentation attributes too, for viewers that ignore <style>
-            width = _n(pen.width_mm) if pen else "0.35"
+            stroke = _n(pen.width_mm) if pen else "0.35"
             out.append(
                 f'<polyline {cls} points="{coords}" fill="none" stroke="{colour}" '
-                f'stroke-width="{width}" stroke-linecap="round" stroke-linejoin="round"/>\n'
+                f'stroke-width="{stroke}" stroke-linecap="round" stroke-linejoin="round"/>\n'
             )
         elif isinstance(it, FilledRects):
             out.append(f'<g {cls} fill="{colour}">')

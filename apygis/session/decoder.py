@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 
-from apygis.compile.events import Mark, Press
+from apygis.compile.events import Event, Mark, Press
 
 __all__ = ["ReportDecoder", "decode_typed"]
 
@@ -33,10 +33,10 @@ class ReportDecoder:
         self.buttons = buttons
         self.repeat = frozenset(repeat)
         self._prev_button = 0
-        self._prev_xy = None
+        self._prev_xy: tuple | None = None
 
     def events(self, report) -> list:
-        out = []
+        out: list[Event] = []
         if not report.proximity:
             self._prev_button = 0
             return out
