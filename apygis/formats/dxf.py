@@ -70,8 +70,8 @@ from apygis.errors import ApygisError, DriverError, FormatError, ValueRangeError
 from apygis.formats import Driver
 from apygis.formats._io import atomic_write_many, read_bytes
 from apygis.formats._readguard import MAX_COORD, ascii_int, check_str, exact, loads_json
-from apygis.model.polylines import export_lines
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, crs_string
+from apygis.model.polylines import export_lines
 from apygis.model.records import (
     LINE_DTYPE,
     MAX_CODE,
@@ -688,7 +688,24 @@ def _load_binary(data: bytes):
     return doc, doc.audit()
 
 
+def _section_tags(section_dict):
+    """The tag stream of a recovered section dict (each section's entities, ENDSEC; EOF)."""
+    from ezdxf.lldxf.types import DXFTag
+
+    for entities in section_dict.values():
+        for entity in entities:  # the first holds (0, SECTION), (2, name)
+            yield from entity
+        yield DXFTag(0, "ENDSEC")
+    yield DXFTag(0, "EOF")
+
+
 def _load_unaudited(data: bytes, path, first: Exception):
+    """The document of ezdxf's recovered sections, loaded without the audit that failed.
+
+    ``recover.read`` is ``Recover.run`` (the structure repairs) and the
+    audit; the recovered sections go to :meth:`Drawing.from_tags` as a tag
+    stream (no private ``Drawing._load_section_dict``).
+    """
     from ezdxf import recover
     from ezdxf.document import Drawing
 
@@ -696,8 +713,7 @@ def _load_unaudited(data: bytes, path, first: Exception):
         if data.startswith(_BINARY_SENTINEL):
             raise first
         tool = recover.Recover.run(io.BytesIO(data))
-        doc = Drawing()
-        doc._load_section_dict(tool.section_dict)
+        doc = Drawing.from_tags(_section_tags(tool.section_dict))
         doc.modelspace()
     except MemoryError:
         raise
