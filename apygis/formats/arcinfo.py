@@ -33,10 +33,12 @@ Reading takes either one ``.gen`` file (points or lines, detected from the
 content; a companion ``.csv`` beside it is used when present) or the name of
 a set (``out/ZH1091.gen`` when ``out/ZH1091_*_lines.gen`` and the others
 exist). Lines come back "in string format": the references are rebuilt with
-:func:`apygis.model.polylines.add_lines` (consecutive vertices become forward and
-backward references, ends that coincide within ``tolerance_m`` with a vertex
-of another line become junctions or merge points), so that AREA and closure
-checks work on imported data. Point numbers of line points are allocated
+the model's one topology rebuild, :meth:`apygis.model.Layer.add_polylines`
+(:func:`apygis.model.polylines.rebuild`: consecutive vertices become forward
+and backward references, ends that meet within ``tolerance_m`` metres merge
+or become branches, rings close), so that AREA and closure checks work on
+imported data; its report is logged (a warning when it refused a join or
+removed duplicate vertices). Point numbers of line points are allocated
 afresh.
 
 Writing is columnar: the text of a million vertices is built as one byte
@@ -68,8 +70,8 @@ from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows
 from apygis.formats._text import digit_columns, esri_wkt, put_right
 from apygis.model import topology
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text
-from apygis.model.polylines import add_lines, export_lines, tolerance_in_crs
-from apygis.model.records import MAX_CODE, SYMBOL_DTYPE, TEXT_DTYPE
+from apygis.model.polylines import export_lines, to_csr
+from apygis.model.records import MAX_CODE
 
 __all__ = [
     "DEFAULT_LAYER",
@@ -851,25 +853,26 @@ def _points_to_layer(layer, d: dict, kind: str, table, gen_path, code: int) -> N
     ids, xyz = d["ids"], d["xyz"]
     rows = table.rows_for(ids) if table is not None else np.full(len(ids), -1)
     have = np.flatnonzero(rows >= 0)
-    dtype = TEXT_DTYPE if kind == "texts" else SYMBOL_DTYPE
-    out = np.zeros(len(ids), dtype)
-    out["num"] = _unique_nums(ids, gen_path, "text" if kind == "texts" else "symbol")
-    out["x"], out["y"], out["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-    if kind == "symbols":
-        out["code"] = code
-        if table is not None:
-            out["code"][have] = table.ints("CODE", 0, MAX_CODE, rows[have])
+    nums = _unique_nums(ids, gen_path, "text" if kind == "texts" else "symbol")
+    xyz = np.array(xyz, dtype=float)
     if table is not None and d["dims"] == 2 and (kind == "texts" or table.has("HEIGHT")):
-        out["z"][have] = table.reals("HEIGHT", rows[have])
-    if kind == "texts" and table is not None:
+        xyz[have, 2] = table.reals("HEIGHT", rows[have])
+    if kind == "symbols":
+        codes = np.full(len(ids), code, np.int64)
+        if table is not None:
+            codes[have] = table.ints("CODE", 0, MAX_CODE, rows[have])
+        layer.add_symbols(xyz, codes, nums)
+        return
+    out = [""] * len(ids)
+    if table is not None:
         table.need("TEXT")
         texts = table.cols["TEXT"]
         for k in have:
             try:
-                out["text"][k] = check_text(texts[rows[k]])
+                out[k] = check_text(texts[rows[k]])
             except RecordError as exc:
                 table.fail(str(exc), rows[k])
-    layer._tables[kind].append(out)
+    layer.add_texts(xyz, out, nums)
 
 
 def _line_codes(d: dict, table, code: int) -> list[int]:
@@ -881,56 +884,14 @@ def _line_codes(d: dict, table, code: int) -> list[int]:
     return codes.tolist()
 
 
-def _add_lines_safely(
-    layer: Layer, lines: list[np.ndarray], codes, closed, tol: float, crs=None
-) -> None:
-    """:func:`add_lines`, falling back to plain lines where joining breaks the topology.
-
-    Joining can produce degenerate chains (two lines with the same two end
-    points, one the reverse of the other, merge into a two-point "ring"):
-    such lines are added again without joining, and a warning says so.
-    """
+def _add_lines(layer: Layer, lines: list[np.ndarray], codes, closed, tol: float, crs, path) -> None:
+    """The lines through the model's one topology rebuild; its report logged."""
     if not lines:
         return
-    if crs is not None:  # tol is metres; the coordinates are in the CRS's units
-        ys = [p[:, 1].mean() for p in lines if len(p)]
-        tol = tolerance_in_crs(tol, crs, float(np.mean(ys)) if ys else 0.0)
-    closed = [
-        bool(c) or (len(p) >= 4 and bool(np.hypot(*(p[-1, :2] - p[0, :2])) <= tol))
-        for p, c in zip(lines, closed, strict=True)
-    ]
-    trial = layer.copy()
-    nums = add_lines(trial, lines, codes, closed=closed, tolerance_m=tol)
-    issues = [i for i in topology.validate_line_points(trial.line_points) if i.severity == "error"]
-    if not issues:
-        layer._tables["line_points"].replace(trial.line_points)
-        return
-    lp = trial.line_points
-    bad = {i.num for i in issues}
-    rows = np.flatnonzero(np.isin(lp["num"], list(bad)))
-    for f in ("fwd", "back", "side1", "side2"):
-        bad.update(int(v) for v in lp[f][rows] if v >= 0)
-    bad_lines = {k for k, ns in enumerate(nums) if bad.intersection(ns)}
-    log.warning(
-        "%d line(s) could not be joined to their neighbours without breaking the topology "
-        "(e.g. two lines between the same two points); added unjoined",
-        len(bad_lines),
-    )
-    keep = [k for k in range(len(lines)) if k not in bad_lines]
-    if keep:
-        add_lines(
-            layer,
-            [lines[k] for k in keep],
-            [codes[k] for k in keep],
-            closed=[closed[k] for k in keep],
-            tolerance_m=tol,
-        )
-    for k in sorted(bad_lines):
-        pts = lines[k]
-        ring = bool(closed[k])
-        if ring and len(pts) >= 2 and np.hypot(*(pts[-1, :2] - pts[0, :2])) <= tol:
-            pts = pts[:-1]
-        layer.add_line(pts, code=int(codes[k]), closed=ring and len(pts) >= 3)
+    coords, offsets = to_csr(lines)
+    rep = layer.add_polylines(coords, offsets, codes, closed, snap_m=tol, crs=crs)
+    say = log.warning if rep.refused or rep.duplicates_removed or rep.empty else log.info
+    say("%s: layer %s: lines rebuilt: %s", path, layer.ext, rep.message())
 
 
 def _lines_of(d: dict) -> list[np.ndarray]:
@@ -998,7 +959,7 @@ def _read_single(p: Path, layer: str | None, tol: float, code: int) -> MapFile:
     if kind in ("lines", "polygons"):
         lines = _lines_of(d)
         codes = _line_codes(d, table, code)
-        _add_lines_safely(lay, lines, codes, [kind == "polygons"] * len(lines), tol, mp.crs)
+        _add_lines(lay, lines, codes, [kind == "polygons"] * len(lines), tol, mp.crs, p)
     else:
         _points_to_layer(lay, d, kind, table, p, code)
     return mp
@@ -1036,13 +997,14 @@ def _read_set(p: Path, members: dict, tol: float, code: int, progress) -> MapFil
                 progress(done, len(members))
         # rings first, so that branches of open lines find their junctions on them
         order = sorted(range(len(all_lines)), key=lambda k: not all_closed[k])
-        _add_lines_safely(
+        _add_lines(
             lay,
             [all_lines[k] for k in order],
             [all_codes[k] for k in order],
             [all_closed[k] for k in order],
             tol,
             mp.crs,
+            base,
         )
     return mp
 

@@ -32,7 +32,8 @@ legacy files; what it repaired is logged): model-space ``POINT`` and
 their object coordinate system, or 3-D) and flattened ``ARC``, ``CIRCLE``,
 ``ELLIPSE`` and ``SPLINE`` become lines, ``TEXT`` and ``MTEXT`` texts. DXF
 layers map to map layers by ``layer_map``; lines without apygis XDATA get
-their topology rebuilt by :func:`apygis.model.polylines.add_lines`. A file that
+their topology rebuilt by the model's one rebuild, :meth:`apygis.model.Layer.add_polylines`
+(its report logged). A file that
 apygis wrote and nobody changed since (the header record holds the size and
 CRC-32 of the entities section) is parsed by the writer's own templates
 instead of ezdxf: the same records, a hundred times faster.
@@ -66,19 +67,24 @@ from pathlib import Path
 
 import numpy as np
 
-from apygis.errors import ApygisError, DriverError, FormatError, ValueRangeError
+from apygis.errors import (
+    ApygisError,
+    DriverError,
+    FormatError,
+    RecordError,
+    TopologyError,
+    ValueRangeError,
+)
 from apygis.formats import Driver
 from apygis.formats._io import atomic_write_many, read_bytes
 from apygis.formats._readguard import MAX_COORD, ascii_int, check_str, exact, loads_json
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, crs_string
-from apygis.model.polylines import export_lines
+from apygis.model.polylines import export_lines, to_csr
 from apygis.model.records import (
     LINE_DTYPE,
     MAX_CODE,
-    NO_REF,
-    SYMBOL_DTYPE,
-    TEXT_DTYPE,
     TEXT_LEN,
+    next_numbers,
 )
 
 __all__ = [
@@ -1149,102 +1155,61 @@ def _fast_entities(text: str, header: dict, names, opts: dict, stats: Counter):
 
 
 def _numbers(given: list, path, what: str) -> np.ndarray:
-    """Point numbers: the given ones, new ones after the highest for the rest."""
+    """Point numbers: the given ones, new ones by the model's numbering rule for the rest."""
     missing = np.array([g is None for g in given], dtype=bool)
     try:
         known = np.array([g for g in given if g is not None], dtype=np.int64)
     except OverflowError:
         raise FormatError(f"a {what} number does not fit 64 bits", path=path) from None
-    start = max(int(known.max()) + 1 if len(known) else 1, 1)
     nums = np.empty(len(given), dtype=np.int64)
     nums[~missing] = known
-    nums[missing] = np.arange(start, start + int(missing.sum()))
+    nums[missing] = next_numbers(known, int(missing.sum()))
     return nums
 
 
-def _plain_lines(layer: Layer, lines: list, closed: list, code: int) -> None:
-    """Lines as they are: one chain each, no joins (``topology=False``)."""
-    arrs = []
-    rings = []
-    for a, cl in zip(lines, closed, strict=True):
-        if cl and len(a) >= 4 and np.array_equal(a[0], a[-1]):
-            a = a[:-1]
-        arrs.append(a)
-        rings.append(cl and len(a) >= 3)
-    lens = np.array([len(a) for a in arrs], dtype=np.int64)
-    n = int(lens.sum())
-    if not n:
-        return
-    xyz = np.concatenate(arrs)
-    lp0 = layer.line_points
-    first_num = int(lp0["num"].max()) + 1 if len(lp0) else 1
-    nums = np.arange(first_num, first_num + n, dtype=np.int64)
-    starts = np.r_[0, np.cumsum(lens)[:-1]]
-    line_of = np.repeat(np.arange(len(arrs)), lens)
-    pos = np.arange(n) - starts[line_of]
-    lastp = lens[line_of] - 1
-    ring = np.array(rings, dtype=bool)[line_of]
-    rows = np.zeros(n, LINE_DTYPE)
-    rows["num"] = nums
-    rows["x"], rows["y"], rows["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-    rows["code"] = code
-    rows["fwd"] = np.where(pos < lastp, nums + 1, np.where(ring, nums[starts[line_of]], NO_REF))
-    rows["back"] = np.where(
-        pos > 0, nums - 1, np.where(ring, nums[starts[line_of] + lastp], NO_REF)
-    )
-    rows["side1"] = rows["side2"] = NO_REF
-    layer._tables["line_points"].append(rows)
-
-
 def _make_layer(ext: str, c: _Collect, opts: dict, path) -> Layer:
-    from apygis.model.polylines import add_lines
-
-    sym = np.zeros(len(c.sym), SYMBOL_DTYPE)
-    if c.sym:
-        arr = np.array([s[1:4] for s in c.sym], dtype=float)
-        sym["num"] = _numbers([s[0] for s in c.sym], path, "symbol")
-        sym["x"], sym["y"], sym["z"] = arr[:, 0], arr[:, 1], arr[:, 2]
-        sym["code"] = [s[4] for s in c.sym]
-    txt = np.zeros(len(c.txt), TEXT_DTYPE)
-    if c.txt:
-        arr = np.array([t[1:4] for t in c.txt], dtype=float)
-        txt["num"] = _numbers([t[0] for t in c.txt], path, "text")
-        txt["x"], txt["y"], txt["z"] = arr[:, 0], arr[:, 1], arr[:, 2]
-        txt["text"] = [t[4] for t in c.txt]
-    chunks = list(c.own_arr)
-    if c.own:
-        try:
-            ints = np.array([o[:7] for o in c.own], dtype=np.int64)
-        except OverflowError:
-            raise FormatError("a line point number does not fit 64 bits", path=path) from None
-        chunks.append((ints, np.array([o[7:] for o in c.own], dtype=float)))
-    if chunks:
-        ints = np.concatenate([ch[0] for ch in chunks])
-        xyz = np.concatenate([ch[1] for ch in chunks])
-        order = np.argsort(ints[:, 0], kind="stable")  # table order, from the rows
-        ints, xyz = ints[order], xyz[order]
-        lp = np.zeros(len(ints), LINE_DTYPE)
-        for j, name in enumerate(("num", "code", "fwd", "back", "side1", "side2"), start=1):
-            lp[name] = ints[:, j]
-        lp["x"], lp["y"], lp["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-    else:
-        lp = np.zeros(0, LINE_DTYPE)
-    layer = Layer.from_arrays(ext, sym, lp, txt)
-    if c.lines:
-        try:
-            if opts["topology"]:
-                add_lines(
-                    layer,
-                    c.lines,
-                    opts["line_code"],
-                    c.closed,
-                    tolerance_m=opts["tolerance_m"],
-                    crs=opts.get("crs"),
-                )
-            else:
-                _plain_lines(layer, c.lines, c.closed, opts["line_code"])
-        except ValueError as exc:  # RecordError, TopologyError
-            raise FormatError(f"layer {ext}: {exc}", path=path) from None
+    layer = Layer(ext)
+    try:
+        if c.sym:
+            arr = np.array([s[1:4] for s in c.sym], dtype=float)
+            nums = _numbers([s[0] for s in c.sym], path, "symbol")
+            layer.add_symbols(arr, np.array([s[4] for s in c.sym], np.int64), nums)
+        if c.txt:
+            arr = np.array([t[1:4] for t in c.txt], dtype=float)
+            nums = _numbers([t[0] for t in c.txt], path, "text")
+            layer.add_texts(arr, [t[4] for t in c.txt], nums)
+        chunks = list(c.own_arr)
+        if c.own:
+            try:
+                ints = np.array([o[:7] for o in c.own], dtype=np.int64)
+            except OverflowError:
+                raise FormatError("a line point number does not fit 64 bits", path=path) from None
+            chunks.append((ints, np.array([o[7:] for o in c.own], dtype=float)))
+        if chunks:
+            ints = np.concatenate([ch[0] for ch in chunks])
+            xyz = np.concatenate([ch[1] for ch in chunks])
+            order = np.argsort(ints[:, 0], kind="stable")  # table order, from the rows
+            ints, xyz = ints[order], xyz[order]
+            lp = np.zeros(len(ints), LINE_DTYPE)
+            for j, name in enumerate(("num", "code", "fwd", "back", "side1", "side2"), start=1):
+                lp[name] = ints[:, j]
+            lp["x"], lp["y"], lp["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+            layer.add_line_points(lp)
+        if c.lines:
+            coords, offsets = to_csr(c.lines)
+            rep = layer.add_polylines(
+                coords,
+                offsets,
+                opts["line_code"],
+                np.array(c.closed, dtype=bool),
+                snap_m=opts["tolerance_m"],
+                crs=opts.get("crs"),
+                join=bool(opts["topology"]),
+            )
+            say = log.warning if rep.refused or rep.duplicates_removed or rep.empty else log.info
+            say("%s: layer %s: lines rebuilt: %s", path, ext, rep.message())
+    except (RecordError, TopologyError) as exc:
+        raise FormatError(f"layer {ext}: {exc}", path=path) from None
     return layer
 
 
@@ -1287,7 +1252,7 @@ def read(
         Code of lines read from plain DXF geometry.
     tolerance_m : float
         Distance within which line ends join other lines (see
-        :func:`apygis.model.polylines.add_lines`).
+        :meth:`apygis.model.Layer.add_polylines`).
     topology : bool
         Rebuild junctions and merge lines whose ends meet (default); with
         False every DXF line becomes one chain as it is.
@@ -1358,7 +1323,7 @@ def read(
     except ValueError as exc:  # RecordError
         raise FormatError(f"map header: {exc}", path=path) from None
     _report(path, stats)
-    opts["crs"] = m.crs  # tolerance_m is metres: add_lines converts it to the CRS's units
+    opts["crs"] = m.crs  # tolerance_m is metres: the rebuild converts it to the CRS's units
     for ext, c in collected.items():
         m.add_layer(_make_layer(ext, c, opts, path))
     return m

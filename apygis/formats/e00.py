@@ -21,8 +21,9 @@ Reading an E00 file written this way gives the map back record for record:
 point numbers, references, heights, codes and texts come from the INFO
 tables, X and Y from the arcs and labels. Any other vector E00 file
 (compressed or not, single or double precision) is read as one layer: arcs
-become lines whose topology is rebuilt with
-:func:`apygis.model.polylines.add_lines`, label points become symbols. Grid E00
+become lines whose topology is rebuilt by the model's one rebuild,
+:meth:`apygis.model.Layer.add_polylines` (its report logged), label points
+become symbols. Grid E00
 files (a ``GRD`` section) are refused.
 
 GDAL's AVCE00 driver reads the files written here as layers ``ARC`` (the AAT
@@ -47,8 +48,8 @@ from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows, exac
 from apygis.formats._text import digit_columns, esri_wkt, put_right
 from apygis.model import topology
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
-from apygis.model.polylines import add_lines, export_lines
-from apygis.model.records import LINE_DTYPE, MAX_CODE, NO_REF, SYMBOL_DTYPE, TABLES, TEXT_DTYPE
+from apygis.model.polylines import export_lines
+from apygis.model.records import LINE_DTYPE, MAX_CODE, NO_REF, TABLES
 
 __all__ = [
     "DEFAULT_LAYER",
@@ -1395,29 +1396,10 @@ def _lines_to_map(info, tables, mp: MapFile, default: str, path, tol: float) -> 
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
             _bad(aat, k, aat.raw("CODE")[1], path, "a code 0-99", str(codes[k]).encode())
-    lines = [xy[off[k] : off[k + 1]] for k in range(narc)]
-    keep = [k for k in range(len(lines)) if len(lines[k])]
     layer = mp.layer(default)
-    trial = layer.copy()
-    add_lines(trial, [lines[k] for k in keep], [int(codes[k]) for k in keep], None, tol, crs=mp.crs)
-    errors = [i for i in topology.validate_line_points(trial.line_points) if i.severity == "error"]
-    if errors:
-        log.warning(
-            "%s: joining the arcs at coincident ends breaks the line topology (%s); "
-            "arcs added unjoined",
-            path,
-            errors[0],
-        )
-        for k in keep:
-            pts = lines[k]
-            ring = len(pts) >= 4 and bool(np.all(pts[0] == pts[-1]))
-            layer.add_line(
-                np.column_stack([pts[:-1] if ring else pts, np.zeros(len(pts) - ring)]),
-                code=int(codes[k]),
-                closed=ring,
-            )
-    else:
-        layer._tables["line_points"].replace(trial.line_points)
+    rep = layer.add_polylines(xy, off, codes, snap_m=tol, crs=mp.crs)
+    say = log.warning if rep.refused or rep.duplicates_removed or rep.empty else log.info
+    say("%s: layer %s: arcs rebuilt: %s", path, layer.ext, rep.message())
 
 
 def _lines_from_lpt(t: _Table, ids, off, xy, mp: MapFile, path) -> None:
@@ -1451,7 +1433,15 @@ def _lines_from_lpt(t: _Table, ids, off, xy, mp: MapFile, path) -> None:
         rows[f] = np.where(v < 0, NO_REF, v)
     _, first = np.unique(layers, return_index=True)
     for ext in layers[np.sort(first)].tolist():
-        mp.layer(ext)._tables["line_points"].append(rows[layers == ext])
+        _add_records(mp.layer(ext).add_line_points, path, rows[layers == ext])
+
+
+def _add_records(add, path, *args) -> None:
+    """A layer's bulk ``add_*`` method called with ``args``; what it refuses is a FormatError."""
+    try:
+        add(*args)
+    except RecordError as exc:
+        raise FormatError(str(exc), path=path) from None
 
 
 def _labels_to_map(info, tables, mp: MapFile, default: str, path) -> None:
@@ -1468,22 +1458,21 @@ def _labels_to_map(info, tables, mp: MapFile, default: str, path) -> None:
         return
     x, y = xy[:, 0], xy[:, 1]
     if pat is None or not _need_items(pat, _PAT_ITEMS):
-        rows = np.zeros(n, SYMBOL_DTYPE)
         nums = value
         if nums.min() < 0 or len(np.unique(nums)) != n:
             log.warning("%s: label IDs negative or repeated; symbols numbered 1..%d", path, n)
             nums = np.arange(1, n + 1)
-        rows["num"], rows["x"], rows["y"] = nums, x, y
+        z = np.zeros(n)
         if pat is not None and pat.has("HEIGHT"):
-            rows["z"] = _float_col(pat, "HEIGHT", path)
+            z = _float_col(pat, "HEIGHT", path)
+        codes = np.zeros(n, np.int64)
         if pat is not None and pat.has("CODE"):
             codes = _int_col(pat, "CODE", path)
             bad = (codes < 0) | (codes > MAX_CODE)
             if bad.any():
                 k = int(np.flatnonzero(bad)[0])
                 _bad(pat, k, pat.raw("CODE")[1], path, "a code 0-99", str(codes[k]).encode())
-            rows["code"] = codes
-        mp.layer(default)._tables["symbols"].append(rows)
+        _add_records(mp.layer(default).add_symbols, path, np.column_stack([x, y, z]), codes, nums)
         return
     layers = _str_col(pat, "LAYER")
     _check_ext_col(pat, layers, path)
@@ -1519,17 +1508,12 @@ def _labels_to_map(info, tables, mp: MapFile, default: str, path) -> None:
         lay = mp.layer(ext)
         here = layers == ext
         sel = np.flatnonzero(here & ~is_text)
+        xyz = np.column_stack([x, y, z])
         if len(sel):
-            rows = np.zeros(len(sel), SYMBOL_DTYPE)
-            rows["num"], rows["x"], rows["y"], rows["z"] = nums[sel], x[sel], y[sel], z[sel]
-            rows["code"] = codes[sel]
-            lay._tables["symbols"].append(rows)
+            _add_records(lay.add_symbols, path, xyz[sel], codes[sel], nums[sel])
         sel = np.flatnonzero(here & is_text)
         if len(sel):
-            rows = np.zeros(len(sel), TEXT_DTYPE)
-            rows["num"], rows["x"], rows["y"], rows["z"] = nums[sel], x[sel], y[sel], z[sel]
-            rows["text"] = [texts[k] for k in sel.tolist()]
-            lay._tables["texts"].append(rows)
+            _add_records(lay.add_texts, path, xyz[sel], [texts[k] for k in sel.tolist()], nums[sel])
 
 
 # --------------------------------------------------------------------------- API

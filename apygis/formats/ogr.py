@@ -32,8 +32,8 @@ file reads that OGR layer alone.
 
 Files apygis did not write are imported too: points become symbols (or
 texts, when the layer has a ``text`` field), lines and polygon rings become
-line points whose references are rebuilt by
-:func:`apygis.model.polylines.add_lines`. Writes go through pyogrio's vectorised
+line points whose references are rebuilt by the model's one rebuild,
+:meth:`apygis.model.Layer.add_polylines` (its report logged). Writes go through pyogrio's vectorised
 numpy path (whole columns of WKB and attributes), into a temporary file or
 directory beside the target that is then renamed over it.
 """
@@ -68,6 +68,7 @@ from apygis.formats._io import (
 )
 from apygis.formats._readguard import MAX_COORD, bad_coord_rows
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
+from apygis.model.polylines import to_csr
 from apygis.model.records import (
     LINE_DTYPE,
     MAX_CODE,
@@ -75,6 +76,7 @@ from apygis.model.records import (
     REF_FIELDS,
     SYMBOL_DTYPE,
     TEXT_DTYPE,
+    next_numbers,
 )
 
 __all__ = [
@@ -1081,11 +1083,9 @@ def _exact_table(
 
 def _number_new(nums: np.ndarray, new: np.ndarray, src: _Source, report) -> None:
     """Number (in place) features without a number and later copies of a number in use."""
-    from apygis.model.map import _allocate
-
     word = "symbol" if src.name.endswith("symbols") else "text"
     if new.any():
-        nums[new] = _allocate(nums[~new], int(new.sum()))
+        nums[new] = next_numbers(nums[~new], int(new.sum()))
         if report is not None:
             report.add(src.name, int(new.sum()), word, "added", _numbered(nums[new]))
     order = np.argsort(nums, kind="stable")
@@ -1093,7 +1093,7 @@ def _number_new(nums: np.ndarray, new: np.ndarray, src: _Source, report) -> None
     repeat[order[1:]] = nums[order][1:] == nums[order][:-1]
     if repeat.any():
         old = nums[repeat].copy()
-        nums[repeat] = _allocate(nums, int(repeat.sum()))
+        nums[repeat] = next_numbers(nums, int(repeat.sum()))
         if report is not None:
             shown = zip(old[:5], nums[repeat][:5], strict=True)
             pairs = ", ".join(f"{a} -> {b}" for a, b in shown)
@@ -1164,7 +1164,7 @@ def _line_edits(
     A feature whose ``points`` name a line of ``lp`` and whose code and
     vertices agree with it keeps that line's rows; the rows of lines whose
     feature is gone or differs are dropped; changed and new features go to
-    ``acc`` (rebuilt by ``add_lines``). Returns the rows kept and the branch
+    ``acc`` (rebuilt by ``Layer.add_polylines``). Returns the rows kept and the branch
     ends whose junction was dropped: ``(num, "fwd" | "back", junction xyz)``.
     """
     from apygis.model.polylines import export_lines
@@ -1323,7 +1323,6 @@ def _relink(lay: Layer, relinks: list, report: _EditReport) -> Layer:
     """
     from scipy.spatial import cKDTree
 
-    from apygis.model.map import _allocate
     from apygis.model.topology import lookup
 
     lp = lay.line_points.copy()
@@ -1350,7 +1349,7 @@ def _relink(lay: Layer, relinks: list, report: _EditReport) -> Layer:
                 lp[side][t] = num
             joined += 1
             continue
-        q = int(_allocate(np.r_[lp["num"], [e["num"] for e in extra]].astype(np.int64), 1)[0])
+        q = int(next_numbers(np.r_[lp["num"], [e["num"] for e in extra]].astype(np.int64), 1)[0])
         row = np.zeros(1, LINE_DTYPE)[0]
         row["num"] = q
         row["x"], row["y"], row["z"] = xyz
@@ -1597,8 +1596,8 @@ def read(
         ``"roads=r,rivers=h"``). Default: the extension in an apygis name
         (``r_lines`` -> ``r``), else ``x``, ``y``, ``z``, ``xa``, ... in order.
     tolerance_m : float
-        Distance within which line ends of foreign lines join (see
-        :func:`apygis.model.polylines.add_lines`).
+        Distance in metres within which line ends of foreign lines join (see
+        :func:`apygis.model.polylines.rebuild`).
     default_code : int
         Code of foreign points and lines without a code field (or with NULL).
     code_field, text_field : str or None
@@ -1747,39 +1746,34 @@ def read(
 
 
 def _add_foreign(lay: Layer, acc: _Foreign, tolerance_m, path, crs=None) -> Layer:
-    from apygis.model.polylines import add_lines
-    from apygis.model.map import _allocate
+    """Foreign features into ``lay``: symbols and texts numbered anew, lines rebuilt.
 
-    sym, tx = lay.symbols, lay.texts
-    if acc.symbols:
-        xyz = np.concatenate([a for a, _ in acc.symbols])
-        new = np.zeros(len(xyz), SYMBOL_DTYPE)
-        new["num"] = _allocate(sym["num"], len(xyz))
-        new["x"], new["y"], new["z"] = xyz.T
-        new["code"] = np.concatenate([c for _, c in acc.symbols])
-        sym = np.concatenate([sym, new])
-    if acc.texts:
-        xyz = np.concatenate([a for a, _ in acc.texts])
-        new = np.zeros(len(xyz), TEXT_DTYPE)
-        new["num"] = _allocate(tx["num"], len(xyz))
-        new["x"], new["y"], new["z"] = xyz.T
-        new["text"] = np.concatenate([t for _, t in acc.texts])
-        tx = np.concatenate([tx, new])
-    lay = Layer.from_arrays(lay.ext, sym, lay.line_points, tx)
-    if acc.lines:
-        try:
-            add_lines(
-                lay,
-                acc.lines,
-                acc.line_codes,
-                closed=acc.line_closed,
-                tolerance_m=tolerance_m,
+    The lines go through the model's one topology rebuild (snapping
+    ``tolerance_m`` metres in ``crs``'s units); its report is logged.
+    """
+    try:
+        if acc.symbols:
+            xyz = np.concatenate([a for a, _ in acc.symbols])
+            lay.add_symbols(xyz, np.concatenate([c for _, c in acc.symbols]))
+        if acc.texts:
+            xyz = np.concatenate([a for a, _ in acc.texts])
+            lay.add_texts(xyz, np.concatenate([t for _, t in acc.texts]).tolist())
+        if acc.lines:
+            coords, offsets = to_csr(acc.lines)
+            rep = lay.add_polylines(
+                coords,
+                offsets,
+                np.asarray(acc.line_codes, dtype=np.int64),
+                np.asarray(acc.line_closed, dtype=bool),
+                snap_m=tolerance_m,
                 crs=crs,  # tolerance_m metres in the CRS's units (degrees for lon/lat)
             )
-        except FormatError:
-            raise
-        except (ValueError, TypeError) as exc:  # a bad tolerance_m, a line add_lines refuses
-            raise FormatError(f"layer {lay.ext}: {exc}", path=path) from None
+            say = log.warning if rep.refused or rep.duplicates_removed or rep.empty else log.info
+            say("%s: layer %s: lines rebuilt: %s", path, lay.ext, rep.message())
+    except FormatError:
+        raise
+    except (ValueError, TypeError) as exc:  # a bad tolerance_m, a record the model refuses
+        raise FormatError(f"layer {lay.ext}: {exc}", path=path) from None
     return lay
 
 

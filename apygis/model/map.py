@@ -34,9 +34,9 @@ from apygis.errors import CRSError, RecordError, RecordNotFoundError, TopologyEr
 from apygis.model import topology
 from apygis.model.records import (
     APY_CAPACITY,
-    APY_MAX_NUM,
     LINE_DTYPE,
     MAX_CODE,
+    MAX_COORD,
     NO_REF,
     REF_FIELDS,
     SYMBOL_DTYPE,
@@ -44,6 +44,7 @@ from apygis.model.records import (
     TEXT_DTYPE,
     TEXT_LEN,
     Table,
+    next_numbers,
 )
 
 __all__ = [
@@ -168,15 +169,73 @@ def _linked(lp: np.ndarray, i: int, j: int) -> bool:
 
 def _allocate(used: np.ndarray, count: int) -> np.ndarray:
     """``count`` new point numbers by the rule in this module's docstring."""
-    start = int(used.max()) + 1 if len(used) else 1
-    if start + count - 1 <= APY_MAX_NUM:
-        return np.arange(start, start + count, dtype=np.int64)
-    free = np.setdiff1d(np.r_[np.arange(1, APY_MAX_NUM + 1), 0], used, assume_unique=False)
-    free = np.r_[free[free != 0], free[free == 0]]
-    # numbers above the APY range, continuing after the highest one in use
-    beyond_start = max(start, APY_MAX_NUM + 1)
-    need = max(0, count - len(free))
-    return np.r_[free[:count], np.arange(beyond_start, beyond_start + need)].astype(np.int64)
+    return next_numbers(used, count)
+
+
+def _check_bulk_xyz(xyz, what: str) -> np.ndarray:
+    """Positions as an ``(n, 3)`` float array: finite, at most MAX_COORD in magnitude."""
+    try:
+        pts = np.asarray(xyz, dtype=float)
+    except (TypeError, ValueError):
+        raise RecordError(f"{what} positions are (n, 3) numbers") from None
+    if pts.size == 0:
+        return pts.reshape(0, 3)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise RecordError(f"{what} positions are an (n, 3) array, not {pts.shape}")
+    bad = ~(np.abs(pts) <= MAX_COORD).all(axis=1)  # NaN compares False
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise RecordError(
+            f"{what} {k + 1}: coordinates {pts[k].tolist()} are not finite or exceed "
+            f"{MAX_COORD:g} in magnitude"
+        )
+    return pts
+
+
+def _check_bulk_codes(codes, n: int, what: str) -> np.ndarray:
+    """One code 0-99 or ``n`` of them, as an int array of ``n``."""
+    c = np.asarray(codes)
+    if c.dtype == bool or not (np.issubdtype(c.dtype, np.integer) or c.size == 0):
+        raise RecordError(f"{what} codes are integers 0-{MAX_CODE}")
+    try:
+        c = np.broadcast_to(c.astype(np.int64), (n,))
+    except ValueError:
+        raise RecordError(f"one {what} code or one per {what} ({n}), not {c.shape}") from None
+    bad = (c < 0) | (c > MAX_CODE)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise RecordError(f"{what} {k + 1}: a code is from 0 to {MAX_CODE}, not {int(c[k])}")
+    return c
+
+
+def _bulk_nums(used: np.ndarray, nums, n: int, what: str) -> np.ndarray:
+    """New point numbers: by the numbering rule, or ``nums`` checked (>= 0, distinct, free)."""
+    if nums is None:
+        return next_numbers(used, n)
+    v = np.asarray(nums)
+    if v.shape != (n,) or not (np.issubdtype(v.dtype, np.integer) or n == 0):
+        raise RecordError(f"{what} numbers: {n} integers, not {reprlib.repr(nums)}")
+    v = v.astype(np.int64)
+    if (v < 0).any():
+        raise RecordError(f"{what} number {int(v[v < 0][0])}: point numbers are >= 0")
+    both = np.r_[used, v]
+    uniq, counts = np.unique(both, return_counts=True)
+    if (counts > 1).any():
+        raise RecordError(f"{what} number {int(uniq[counts > 1][0])} is used twice")
+    return v
+
+
+def _as_records(records, dtype: np.dtype, what: str) -> np.ndarray:
+    """``records`` as a fresh array of ``dtype`` (fields converted by name)."""
+    arr = np.asarray(records)
+    if arr.dtype == dtype:
+        return np.array(arr, copy=True).reshape(-1)
+    if arr.dtype.names is None or not set(dtype.names) <= set(arr.dtype.names):
+        raise RecordError(f"{what} records need the fields {', '.join(dtype.names)}")
+    out = np.zeros(len(arr), dtype)
+    for name in dtype.names:
+        out[name] = arr[name]
+    return out
 
 
 class Layer:
@@ -315,6 +374,119 @@ class Layer:
         lp[ahead][i] = nums[0]
         self._tables["line_points"].append(rows)
         return [int(n) for n in nums]
+
+    # ------------------------------------------------------------------ bulk
+
+    def add_symbols(self, xyz, codes, nums=None) -> np.ndarray:
+        """Add many symbols at once and return their point numbers.
+
+        ``xyz`` is ``(n, 3)`` (finite, at most
+        :data:`~apygis.model.records.MAX_COORD` in magnitude), ``codes`` one
+        code 0-99 or one per symbol, ``nums`` None (numbered by the rule in
+        this module's docstring) or ``n`` distinct numbers >= 0 not in use.
+        Nothing is added unless all are valid.
+        """
+        pts = _check_bulk_xyz(xyz, "symbol")
+        c = _check_bulk_codes(codes, len(pts), "symbol")
+        t = self._tables["symbols"]
+        nums = _bulk_nums(t.data["num"], nums, len(pts), f"layer {self.ext}: symbol")
+        rows = np.zeros(len(pts), SYMBOL_DTYPE)
+        rows["num"], rows["code"] = nums, c
+        rows["x"], rows["y"], rows["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
+        t.append(rows)
+        return nums
+
+    def add_texts(self, xyz, texts, nums=None) -> np.ndarray:
+        """Add many texts at once and return their point numbers.
+
+        ``texts`` are one string each (:func:`check_text`: at most 24
+        characters, no control characters, encodable); ``xyz`` and ``nums``
+        as for :meth:`add_symbols`. Nothing is added unless all are valid.
+        """
+        pts = _check_bulk_xyz(xyz, "text")
+        texts = list(texts)
+        if len(texts) != len(pts):
+            raise RecordError(f"{len(texts)} texts for {len(pts)} positions")
+        for k, tx in enumerate(texts):
+            try:
+                check_text(tx)
+            except RecordError as exc:
+                raise RecordError(f"text {k + 1}: {exc}") from None
+        t = self._tables["texts"]
+        nums = _bulk_nums(t.data["num"], nums, len(pts), f"layer {self.ext}: text")
+        rows = np.zeros(len(pts), TEXT_DTYPE)
+        rows["num"], rows["text"] = nums, texts
+        rows["x"], rows["y"], rows["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
+        t.append(rows)
+        return nums
+
+    def add_line_points(self, records) -> np.ndarray:
+        """Add line-point records as they are, references included (exact topology).
+
+        For readers of files that store APY's references (APY native, the
+        ASCII exchange, apygis's own GeoPackage, DXF and E00 tables):
+        ``records`` is a structured array with the fields of
+        :data:`~apygis.model.records.LINE_DTYPE` (others converted). Values
+        are checked as everywhere (coordinates finite and at most
+        :data:`~apygis.model.records.MAX_COORD`, codes 0-99, point numbers
+        >= 0 and distinct, also from the layer's, references -1 or >= 0);
+        whether the references make sound lines is :meth:`validate`'s to
+        say (a reader reports it). Returns the numbers added.
+        """
+        rows = _as_records(records, LINE_DTYPE, "line point")
+        _check_bulk_xyz(np.column_stack([rows["x"], rows["y"], rows["z"]]), "line point")
+        _check_bulk_codes(rows["code"], len(rows), "line point")
+        for f in REF_FIELDS:
+            if (rows[f] < NO_REF).any():
+                raise RecordError(f"a {f} reference is a point number or -1 (none)")
+        t = self._tables["line_points"]
+        nums = _bulk_nums(t.data["num"], rows["num"], len(rows), f"layer {self.ext}: line point")
+        t.append(rows)
+        return nums
+
+    def add_polylines(
+        self,
+        coords,
+        offsets,
+        codes,
+        closed=None,
+        *,
+        snap_m: float | None = None,
+        crs=None,
+        join: bool = True,
+    ):
+        """Add plain polylines, rebuilding their topology; returns the rebuild's report.
+
+        The one way plain geometry becomes line points: see
+        :func:`apygis.model.polylines.rebuild` for the rules (snapping
+        ``snap_m`` metres, default 5 mm, whatever ``crs``; duplicate
+        vertices; rings; merging; junctions; refusals). ``coords`` ``(N, 2|3)``
+        and ``offsets`` (``m + 1``) as shapely's ``linestrings(coords,
+        indices=...)``; ``codes`` and ``closed`` one or one per line.
+        ``join=False`` adds every line as its own chain (rings still close).
+        The layer's line points can be junctions; they are not otherwise
+        changed. Nothing is added unless all input is valid.
+        """
+        from apygis.model import polylines
+
+        t = self._tables["line_points"]
+        plan = polylines.rebuild(
+            t.data,
+            coords,
+            offsets,
+            codes,
+            closed,
+            snap_m=polylines.DEFAULT_SNAP_M if snap_m is None else snap_m,
+            crs=crs,
+            join=join,
+            numbers=lambda count: next_numbers(t.data["num"], count),
+        )
+        if plan.sides:
+            lp = t.rows()
+            for r, f, num in plan.sides:
+                lp[f][r] = num
+        t.append(plan.rows)
+        return plan.report
 
     # ------------------------------------------------------------------ edit lines
 

@@ -32,6 +32,7 @@ __all__ = [
     "APY_MAX_NUM",
     "LINE_DTYPE",
     "MAX_CODE",
+    "MAX_COORD",
     "NO_REF",
     "REF_FIELDS",
     "SYMBOL_DTYPE",
@@ -40,12 +41,18 @@ __all__ = [
     "TEXT_DTYPE",
     "TEXT_LEN",
     "Table",
+    "next_numbers",
 ]
 
 NO_REF = -1
 """Reference value meaning "no neighbour"."""
 
 MAX_CODE = 99
+MAX_COORD = 1e12
+"""Largest coordinate magnitude a record may have (metres, or the CRS's units).
+
+The model and every reader refuse larger (and non-finite) coordinates: past
+it, float64 no longer resolves a millimetre, and no map needs it."""
 TEXT_LEN = 24
 APY_MAX_NUM = 9999
 """Largest point number the APY native format stores (4 digits)."""
@@ -77,6 +84,33 @@ TABLES = {"symbols": SYMBOL_DTYPE, "line_points": LINE_DTYPE, "texts": TEXT_DTYP
 TABLE_WORDS = {"symbols": "symbol", "line_points": "line point", "texts": "text"}
 """A record of each table in words, for messages (``"line point 12"``)."""
 """Table name -> dtype, in the order the native formats store them."""
+
+
+def next_numbers(used: np.ndarray, count: int) -> np.ndarray:
+    """``count`` new point numbers for a table whose numbers in use are ``used``.
+
+    The model's numbering rule: one more than the highest number in use (1
+    for an empty table), consecutively. When the last of them would pass
+    :data:`APY_MAX_NUM` (9999), the free numbers from 1 to 9999 are taken in
+    increasing order, then 0, so that a layer can be filled to APY's
+    capacity; past that, numbers go on above the highest one in use (the
+    model has no limit; only the APY native format refuses them).
+
+    >>> next_numbers(np.array([4, 2]), 3).tolist()
+    [5, 6, 7]
+    >>> next_numbers(np.array([9998, 3]), 3).tolist()  # 9998 + 3 would pass 9999
+    [1, 2, 4]
+    """
+    used = np.asarray(used, dtype=np.int64)
+    start = int(used.max()) + 1 if len(used) else 1
+    if start + count - 1 <= APY_MAX_NUM:
+        return np.arange(start, start + count, dtype=np.int64)
+    free = np.setdiff1d(np.r_[np.arange(1, APY_MAX_NUM + 1), 0], used, assume_unique=False)
+    free = np.r_[free[free != 0], free[free == 0]]
+    # numbers above the APY range, continuing after the highest one in use
+    beyond_start = max(start, APY_MAX_NUM + 1)
+    need = max(0, count - len(free))
+    return np.r_[free[:count], np.arange(beyond_start, beyond_start + need)].astype(np.int64)
 
 
 class Table:

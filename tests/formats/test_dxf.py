@@ -421,7 +421,9 @@ def test_foreign_files_read_with_their_entity_counts(path):
     assert got["texts"] == want["texts"]
     assert got["lines"] == want["lines"]
     if not want["curves"]:
-        assert got["line_points"] == want["vertices"]
+        # the one rebuild closes a polyline whose last vertex repeats its first and drops
+        # repeated consecutive vertices, with or without topology
+        assert want["vertices"] - 2 * want["lines"] <= got["line_points"] <= want["vertices"]
     joined = _totals(apygis.read(path))  # topology rebuilt: lines may merge
     assert joined["symbols"] == want["symbols"]
     assert joined["texts"] == want["texts"]
