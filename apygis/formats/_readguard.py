@@ -19,6 +19,7 @@ import numpy as np
 
 from apygis.errors import FormatError, RecordError
 from apygis.fileio import MAX_INT_DIGITS, MAX_JSON_DEPTH, check_str, loads_json
+from apygis.model.records import MAX_COORD  # the model's bound: readers refuse what it would
 
 __all__ = [
     "MAX_COORD",
@@ -32,9 +33,6 @@ __all__ = [
     "is_ascii_digits",
     "loads_json",
 ]
-
-MAX_COORD = 1e12
-"""The largest coordinate magnitude (metres, or degrees) a reader accepts."""
 
 
 def is_ascii_digits(s: str | bytes) -> bool:

@@ -57,8 +57,8 @@ __all__ = [
     "crs_string",
 ]
 
-_EXT_RE = re.compile(r"^[a-z]{1,3}$")
-_ID_RE = re.compile(r"^[A-Za-z0-9_-]{1,32}$")
+_EXT_RE = re.compile(r"[a-z]{1,3}")  # fullmatch: "$" would let a final newline through
+_ID_RE = re.compile(r"[A-Za-z0-9_-]{1,32}")
 
 
 def check_ext(ext: str) -> str:
@@ -67,14 +67,14 @@ def check_ext(ext: str) -> str:
     >>> check_ext("R")
     'r'
     """
-    if not isinstance(ext, str) or not _EXT_RE.match(ext.lower()):
+    if not isinstance(ext, str) or not _EXT_RE.fullmatch(ext.lower()):
         raise RecordError(f"a layer extension is 1 to 3 letters (a-z), not {ext!r}")
     return ext.lower()
 
 
 def check_map_id(map_id: str) -> str:
     """A map identification: 1-32 characters of A-Z, a-z, 0-9, '_' and '-'."""
-    if not isinstance(map_id, str) or not _ID_RE.match(map_id):
+    if not isinstance(map_id, str) or not _ID_RE.fullmatch(map_id):
         raise RecordError(
             f"a map ID is 1 to 32 characters of letters, digits, '_' and '-', not {map_id!r}"
         )
@@ -225,6 +225,24 @@ def _bulk_nums(used: np.ndarray, nums, n: int, what: str) -> np.ndarray:
     return v
 
 
+def _check_table(name: str, t: np.ndarray) -> None:
+    """The values of a whole table: coordinates and codes (vectorised)."""
+    what = {"symbols": "symbol", "line_points": "line point", "texts": "text"}[name]
+    for axis in ("x", "y", "z"):
+        bad = ~(np.abs(t[axis]) <= MAX_COORD)  # NaN compares False
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise RecordError(
+                f"{what} {t['num'][k]}: {axis.upper()} {t[axis][k]!r} is not finite or exceeds "
+                f"{MAX_COORD:g} in magnitude"
+            )
+    if "code" in t.dtype.names:
+        bad = (t["code"] < 0) | (t["code"] > MAX_CODE)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise RecordError(f"{what} {t['num'][k]}: code {t['code'][k]} is outside 0-{MAX_CODE}")
+
+
 def _as_records(records, dtype: np.dtype, what: str) -> np.ndarray:
     """``records`` as a fresh array of ``dtype`` (fields converted by name)."""
     arr = np.asarray(records)
@@ -256,11 +274,19 @@ class Layer:
 
     @classmethod
     def from_arrays(cls, ext: str, symbols=None, line_points=None, texts=None) -> Layer:
-        """A layer from whole tables (copied; missing fields of other dtypes converted)."""
+        """A layer from whole tables (copied; missing fields of other dtypes converted).
+
+        Coordinates (finite, at most :data:`~apygis.model.records.MAX_COORD`)
+        and codes (0-99) are checked as by the bulk adds: a RecordError
+        names the first bad record. Numbers, references and texts are taken
+        as they are; :meth:`validate` says whether they are sound (readers
+        of exact topology report it).
+        """
         lay = cls(ext)
         for name, arr in (("symbols", symbols), ("line_points", line_points), ("texts", texts)):
             if arr is not None:
                 lay._tables[name].replace(arr)
+                _check_table(name, lay._tables[name].data)
         return lay
 
     @property

@@ -482,5 +482,5 @@ def test_map_id_with_a_line_break_is_refused(tmp_path, small_e00):
     old = next(ln for ln in small_e00.split(b"\n") if ln.startswith(b"ID      "))
     p = tmp_path / "bad.e00"
     p.write_bytes(_edit(small_e00, old, _meta_line(b"ID", b"FUZZ\\n")))
-    with pytest.raises(FormatError, match="holds a line break"):
+    with pytest.raises(FormatError, match=r"holds a line break|map ID is"):
         apygis.read(p)

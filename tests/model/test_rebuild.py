@@ -170,3 +170,11 @@ def test_bad_input_is_refused_and_nothing_added(coords, offsets, codes, match):
     with pytest.raises(RecordError, match=match):
         lay.add_polylines(np.array(coords, float), np.array(offsets), codes)
     assert len(lay.line_points) == 0
+
+
+@pytest.mark.parametrize("name", ["r\n", "AB\n"])
+def test_names_with_a_final_newline_are_refused(name):
+    from apygis.model.map import check_ext, check_map_id
+
+    with pytest.raises(RecordError):
+        (check_ext if len(name) == 2 else check_map_id)(name)
