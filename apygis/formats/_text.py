@@ -24,13 +24,15 @@ _SP, _MINUS, _ZERO = 32, 45, 48
 
 
 def digit_columns(values: np.ndarray, width: int) -> np.ndarray:
-    """The last ``width`` decimal digits of non-negative integers, an ``(n, width)`` byte matrix.
+    """The last ``width`` decimal digits of non-negative integers, as ``(n, width)`` ASCII codes.
 
-    >>> digit_columns(np.array([42, 7]), 4).tobytes()
+    The codes are integers (to be stored into a byte matrix, without a copy here).
+
+    >>> digit_columns(np.array([42, 7]), 4).astype(np.uint8).tobytes()
     b'00420007'
     """
     pw = 10 ** np.arange(width - 1, -1, -1, dtype=np.int64)
-    return (_ZERO + (values[:, None] // pw[None, :]) % 10).astype(np.uint8)
+    return _ZERO + (values[:, None] // pw[None, :]) % 10
 
 
 def put_right(out: np.ndarray, col: int, width: int, a: np.ndarray, negative=None) -> None:
@@ -60,7 +62,7 @@ def put_right(out: np.ndarray, col: int, width: int, a: np.ndarray, negative=Non
 
 
 def esri_wkt(crs) -> str:
-    """The CRS as ESRI WKT (``WKT1_ESRI``); GDAL's WKT 1, or WKT 2, where ESRI WKT cannot hold it."""
+    """The CRS as ESRI WKT (``WKT1_ESRI``); GDAL's WKT 1 (or WKT 2) where ESRI WKT cannot."""
     try:
         wkt = crs.to_wkt("WKT1_ESRI")
     except Exception:  # pyproj: CRSError, or None, where ESRI WKT cannot hold the CRS
