@@ -781,3 +781,42 @@ def test_fast_header_takes_ascii_group_codes_only(tmp_path):
     (tmp_path / "odd.dxf").write_bytes(odd)
     with pytest.raises(FormatError):
         apygis.read(tmp_path / "odd.dxf")
+
+
+# --------------------------------------------------------------------------- the one rebuild
+
+_SQUARE = [((0, 0), (10, 0)), ((10, 0), (10, 10)), ((10, 10), (0, 10)), ((0, 10), (0, 0))]
+
+
+@pytest.mark.parametrize(
+    ("order", "flips"),
+    [
+        ((0, 1, 2, 3), (0, 0, 0, 0)),
+        ((0, 2, 1, 3), (0, 1, 0, 1)),
+        ((3, 1, 0, 2), (1, 1, 1, 1)),
+        ((2, 0, 3, 1), (1, 0, 0, 1)),
+    ],
+)
+def test_four_cad_lines_of_a_square_convert_to_one_closed_line(tmp_path, order, flips):
+    """Four DXF LINEs gave two lines with duplicate points and no closed line (AREA failed)."""
+    import ezdxf
+    from click.testing import CliRunner
+
+    from apygis.cli import main
+
+    doc = ezdxf.new()
+    msp = doc.modelspace()
+    for k, f in zip(order, flips, strict=True):
+        a, b = _SQUARE[k][::-1] if f else _SQUARE[k]
+        msp.add_line((*a, 400.0), (*b, 400.0))
+    src, out = tmp_path / "square.dxf", tmp_path / "square.apa"
+    doc.saveas(src)
+    res = CliRunner().invoke(main, ["convert", str(src), str(out)], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    (lay,) = apygis.read(out).layers.values()
+    assert lay.counts()["lines"] == 1
+    assert lay.counts()["closed_lines"] == 1
+    assert len(lay.line_points) == 4
+    assert lay.validate() == []
+    a, b = (int(v) for v in lay.line_points["num"][lay.chains().rows(0)][:2])
+    assert abs(lay.area(a, b).area_m2) == pytest.approx(100.0)
