@@ -9,7 +9,7 @@ Each seed is one file of a valid dataset that the reader takes alone:
   refused before any parsing, for want of its ``.shx``.
 * ``geojson``: the ``r_line_points`` file: the exact schema, references included.
 * ``fgb``: the ``r_lines`` file: a foreign-looking line layer whose topology
-  the reader rebuilds (``build.add_lines``).
+  the reader rebuilds (``Layer.add_polylines``).
 """
 
 from __future__ import annotations
