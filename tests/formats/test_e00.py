@@ -484,3 +484,24 @@ def test_map_id_with_a_line_break_is_refused(tmp_path, small_e00):
     p.write_bytes(_edit(small_e00, old, _meta_line(b"ID", b"FUZZ\\n")))
     with pytest.raises(FormatError, match=r"holds a line break|map ID is"):
         apygis.read(p)
+
+
+def test_foreign_arcs_go_through_the_one_rebuild(tmp_path, caplog):
+    """A square of four arcs is one closed line even when other arcs cannot be joined
+    (before, one arc pair that would make a two-point loop left every arc unjoined)."""
+    arcs = [((0, 0), (10, 0)), ((10, 10), (10, 0)), ((10, 10), (0, 10)), ((0, 0), (0, 10))]
+    arcs += [((20, 0), (25, 0)), ((25, 0), (20, 0))]  # a line and its reverse
+    text = [b"EXP  0 /SQ.E00", b"ARC  2"]
+    for k, (a, b) in enumerate(arcs, start=1):
+        text.append("".join(f"{v:10d}" for v in (k, k, 0, 0, 0, 0, 2)).encode())
+        text.append("".join(f"{v:14.7E}" for v in (*a, *b)).encode())
+    text += ["".join(f"{v:10d}" for v in (-1, 0, 0, 0, 0, 0, 0)).encode(), b"EOS", b""]
+    p = tmp_path / "sq.e00"
+    p.write_bytes(b"\n".join(text))
+    with caplog.at_level("INFO", logger="apygis.formats.e00"):
+        lay = apygis.read(p).layers["a"]
+    assert lay.counts()["closed_lines"] == 1
+    assert lay.counts()["lines"] == 3
+    assert len(lay.line_points) == 8
+    assert lay.validate() == []
+    assert "two points into a loop" in caplog.text
