@@ -472,7 +472,9 @@ def area(lp: np.ndarray, first: int, second: int) -> AreaResult:
     ------
     TopologyError
         The points are not neighbours, or the ring does not close; the message
-        names the two end points of the gap and its length.
+        names the two end points of the gap and its length. A loop whose
+        last point hangs on its first as a branch is not closed (see
+        :func:`chains`), wherever the walk starts.
 
     >>> from apygis.model.map import Layer
     >>> lay = Layer("r")
@@ -497,7 +499,9 @@ def area(lp: np.ndarray, first: int, second: int) -> AreaResult:
         nxt_num = lp[step][cur]
         k = row_of(nums, nxt_num)
         if k is not None and k == i:
-            break
+            if lp[other][i] == nums[cur]:
+                break
+            k = None  # the last point hangs on the first as a branch: no closed line
         if k is None or lp[other][k] != nums[cur] or k in seen:
             # The ring is open after `cur`: find the other end by walking back from first.
             back_rows = [i]
@@ -510,10 +514,18 @@ def area(lp: np.ndarray, first: int, second: int) -> AreaResult:
                 c = m
             end_a, end_b = cur, back_rows[-1]
             gap = math.hypot(lp["x"][end_b] - lp["x"][end_a], lp["y"][end_b] - lp["y"][end_a])
+            hint = ""
+            for end, ref in ((end_a, step), (end_b, other)):
+                hang = row_of(nums, lp[ref][end])
+                if hang is not None and (hang in seen or hang in back_rows):
+                    hint = (
+                        f" (point {nums[end]} hangs on point {nums[hang]} of the same line as "
+                        "a branch, which does not close a line)"
+                    )
             raise TopologyError(
                 f"AREA: the line is not closed: it ends at point {nums[end_a]} "
                 f"({lp['x'][end_a]:.2f}, {lp['y'][end_a]:.2f}) and at point {nums[end_b]} "
-                f"({lp['x'][end_b]:.2f}, {lp['y'][end_b]:.2f}), gap {gap:.2f} m"
+                f"({lp['x'][end_b]:.2f}, {lp['y'][end_b]:.2f}), gap {gap:.2f} m{hint}"
             )
         rows.append(k)
         seen.add(k)

@@ -188,3 +188,17 @@ def test_lookup_and_mutual_links_with_missing_numbers():
     assert succ.tolist() == [1, -1]
     assert pred.tolist() == [-1, 0]
     assert topo.lookup(lp["num"], np.array([6, 7])).tolist() == [1, -1]
+
+
+def test_area_refuses_a_loop_closed_by_a_branch_from_any_start():
+    # 1 -> 2 -> 3 -> 4, and 4 hangs on 2 as a branch: the loop 2, 3, 4 is no closed line
+    # (chains() says so). AREA walked 2, 3, 4 back to 2 and measured it when started at
+    # 2, but refused when started at 3: it did not check that the last link back to the
+    # first point was mutual (found by the stateful edit test).
+    lay = apygis.MapFile("T").layer("r")
+    n = lay.add_line([(0, -10, 0), (0, 0, 0), (0, 10, 0), (10, 10, 0)], code=21)
+    assert lay.join(n[3], n[1]) == "branch"
+    assert not lay.closure(n[1]).closed
+    for a, b in [(n[1], n[2]), (n[2], n[3]), (n[2], n[1]), (n[3], n[2])]:
+        with pytest.raises(TopologyError, match=r"not closed.*point 4 hangs on point 2 of the"):
+            lay.area(a, b)
