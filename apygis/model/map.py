@@ -229,14 +229,21 @@ def _check_table(name: str, t: np.ndarray) -> None:
     """The values of a whole table: coordinates and codes (vectorised)."""
     what = {"symbols": "symbol", "line_points": "line point", "texts": "text"}[name]
     for axis in ("x", "y", "z"):
-        bad = ~(np.abs(t[axis]) <= MAX_COORD)  # NaN compares False
+        v = t[axis]
+        if not len(v) or (v.min() >= -MAX_COORD and v.max() <= MAX_COORD):  # NaN fails
+            continue
+        bad = ~(np.abs(v) <= MAX_COORD)
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
             raise RecordError(
                 f"{what} {t['num'][k]}: {axis.upper()} {t[axis][k]!r} is not finite or exceeds "
                 f"{MAX_COORD:g} in magnitude"
             )
-    if "code" in t.dtype.names:
+    if (
+        "code" in t.dtype.names
+        and len(t)
+        and not 0 <= t["code"].min() <= t["code"].max() <= MAX_CODE
+    ):
         bad = (t["code"] < 0) | (t["code"] > MAX_CODE)
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
