@@ -1161,9 +1161,24 @@ def _numbers(given: list, path, what: str) -> np.ndarray:
         known = np.array([g for g in given if g is not None], dtype=np.int64)
     except OverflowError:
         raise FormatError(f"a {what} number does not fit 64 bits", path=path) from None
-    nums = np.empty(len(given), dtype=np.int64)
+    nums = np.full(len(given), -1, dtype=np.int64)
     nums[~missing] = known
-    nums[missing] = next_numbers(known, int(missing.sum()))
+    # a later copy of a number in use (an entity copied in CAD with its XDATA) or a
+    # negative number is numbered anew, and the log says how many
+    order = np.argsort(nums, kind="stable")
+    repeat = np.zeros(len(nums), dtype=bool)
+    repeat[order[1:]] = nums[order][1:] == nums[order][:-1]
+    renumber = ~missing & (repeat | (nums < 0))
+    if renumber.any():
+        log.warning(
+            "%s: %d %s number(s) repeated or negative (e.g. %d): numbered anew",
+            path,
+            int(renumber.sum()),
+            what,
+            int(nums[renumber][0]),
+        )
+    new = missing | renumber
+    nums[new] = next_numbers(nums[~new], int(new.sum()))
     return nums
 
 

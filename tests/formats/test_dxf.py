@@ -820,3 +820,27 @@ def test_four_cad_lines_of_a_square_convert_to_one_closed_line(tmp_path, order, 
     assert lay.validate() == []
     a, b = (int(v) for v in lay.line_points["num"][lay.chains().rows(0)][:2])
     assert abs(lay.area(a, b).area_m2) == pytest.approx(100.0)
+
+
+def test_a_symbol_copied_in_cad_with_its_number_is_numbered_anew(tmp_path, caplog):
+    import ezdxf
+
+    m = apygis.MapFile("CP")
+    lay = m.layer("s")
+    lay.add_symbol(1.0, 2.0, 3.0, 7)
+    lay.add_symbol(5.0, 6.0, 7.0, 8)
+    src = tmp_path / "cp.dxf"
+    apygis.write(m, src)
+    doc = ezdxf.readfile(src)
+    msp = doc.modelspace()
+    first = next(e for e in msp if e.dxftype() == "INSERT")
+    dup = first.copy()
+    msp.add_entity(dup)
+    dup.dxf.insert = (9.0, 9.0, 3.0)
+    doc.saveas(src)
+    with caplog.at_level("WARNING", logger="apygis.formats.dxf"):
+        got = apygis.read(src).layers["s"]
+    assert len(got.symbols) == 3
+    assert sorted(got.symbols["num"].tolist()) == [1, 2, 3]
+    assert got.validate() == []
+    assert "numbered anew" in caplog.text
