@@ -823,6 +823,7 @@ class _Collect:
         self.txt: list[tuple] = []  # (num or None, x, y, z, text)
         self.own: list[tuple] = []  # (row, num, code, fwd, back, s1, s2, x, y, z)
         self.own_arr: list[tuple[np.ndarray, np.ndarray]] = []  # (ints (n, 7), xyz (n, 3))
+        self.own_nums: set[int] = set()  # line-point numbers read so far from own lines
         self.lines: list[np.ndarray] = []
         self.closed: list[bool] = []
 
@@ -982,6 +983,7 @@ def _polyline(e, c: _Collect, stats: Counter, what: str) -> None:
             c.lines.append(np.array([_xyz(p, what) for p in pts]))
             c.closed.append(bool(e.is_closed))
         return
+    own = []
     for i, (v, p, xd) in enumerate(zip(verts, pts, xds, strict=True)):
         vwhat = f"VERTEX #{v.dxf.get('handle', '?')} of {what}"
         if xd is None:
@@ -994,7 +996,16 @@ def _polyline(e, c: _Collect, stats: Counter, what: str) -> None:
         num, code, fwd, back, s1, s2, row = ints
         if not 0 <= code <= MAX_CODE:
             raise FormatError(f"{vwhat}: line code {code} outside 00-{MAX_CODE}")
-        c.own.append((row, num, code, fwd, back, s1, s2, *_xyz(p, vwhat)))
+        own.append((row, num, code, fwd, back, s1, s2, *_xyz(p, vwhat)))
+    nums = {o[1] for o in own}
+    if len(nums) < len(own) or nums & c.own_nums:
+        # a copy made in CAD, XDATA and all: its numbers are taken, so it is new geometry
+        stats["copied lines"] += 1
+        c.lines.append(np.array([_xyz(p, what) for p in pts]))
+        c.closed.append(bool(e.is_closed))
+        return
+    c.own_nums |= nums
+    c.own += own
 
 
 def _slow_read(data: bytes, path, names, opts: dict, stats: Counter, progress):
@@ -1224,7 +1235,8 @@ def _make_layer(ext: str, c: _Collect, opts: dict, path) -> Layer:
             say = log.warning if rep.refused or rep.duplicates_removed or rep.empty else log.info
             say("%s: layer %s: lines rebuilt: %s", path, ext, rep.message())
     except (RecordError, TopologyError) as exc:
-        raise FormatError(f"layer {ext}: {exc}", path=path) from None
+        msg = str(exc) if str(exc).startswith(f"layer {ext}:") else f"layer {ext}: {exc}"
+        raise FormatError(msg, path=path) from None
     return layer
 
 
@@ -1359,6 +1371,13 @@ def _report(path, stats: Counter) -> None:
             stats["truncated"],
             TEXT_LEN,
             stats.get("first_truncated"),
+        )
+    if stats["copied lines"]:
+        log.warning(
+            "%s: %d apygis line(s) repeat point numbers read before (copied in CAD): "
+            "read as new lines, their topology rebuilt",
+            path,
+            stats["copied lines"],
         )
     if stats["bulges"]:
         log.info(

@@ -844,3 +844,26 @@ def test_a_symbol_copied_in_cad_with_its_number_is_numbered_anew(tmp_path, caplo
     assert sorted(got.symbols["num"].tolist()) == [1, 2, 3]
     assert got.validate() == []
     assert "numbered anew" in caplog.text
+
+
+def test_an_apygis_line_copied_in_cad_is_read_as_a_new_line(tmp_path, caplog):
+    """The copy repeats the original's point numbers in its XDATA: it is new geometry."""
+    import ezdxf
+
+    m = apygis.MapFile("CP")
+    m.layer("s").add_line([(0, 0, 0), (5, 0, 0), (5, 5, 0)], code=3)
+    src = tmp_path / "cp.dxf"
+    apygis.write(m, src)
+    doc = ezdxf.readfile(src)
+    msp = doc.modelspace()
+    pl = next(e for e in msp if e.dxftype() == "POLYLINE")
+    dup = pl.copy()
+    msp.add_entity(dup)
+    dup.translate(20, 0, 0)
+    doc.saveas(src)
+    with caplog.at_level("WARNING", logger="apygis.formats.dxf"):
+        got = apygis.read(src).layers["s"]
+    assert got.counts()["lines"] == 2
+    assert len(got.line_points) == 6
+    assert got.validate() == []
+    assert "copied in CAD" in caplog.text
