@@ -19,6 +19,19 @@ Once 9999 (the largest number the APY native format stores) is in use, the
 lowest free number from 0 to 9999 is taken instead, so that a layer can be
 filled to APY's capacity of 10000 line points; past that, numbers go on
 above 9999 (the model has no limit; only the native format refuses them).
+The rule is :func:`apygis.model.records.next_numbers`; every add, single or
+bulk, and every reader that numbers records uses it.
+
+Bulk adds
+---------
+Drivers never touch the tables: they add many records at once with
+:meth:`Layer.add_symbols`, :meth:`Layer.add_texts`,
+:meth:`Layer.add_line_points` (records with their references, for formats
+that store them) and :meth:`Layer.add_polylines` (plain geometry, through
+the one topology rebuild of :mod:`apygis.model.polylines`), or build a layer
+from whole tables with :meth:`Layer.from_arrays`. All check what they take
+(coordinates finite and at most ``MAX_COORD``, codes 0-99, texts) and add
+nothing when any record is bad.
 """
 
 from __future__ import annotations
@@ -269,8 +282,11 @@ class Layer:
     The tables are read-only numpy structured arrays (:attr:`symbols`,
     :attr:`line_points`, :attr:`texts`; fields in
     :mod:`apygis.model.records`). Change them with the methods below, which
-    keep point numbers unique and line references consistent, or replace them
-    wholesale with :meth:`from_arrays` (drivers do that).
+    keep point numbers unique and line references consistent, add many at once
+    with the bulk adds (:meth:`add_symbols`, :meth:`add_texts`,
+    :meth:`add_line_points`, :meth:`add_polylines`), or build a layer from
+    whole tables with :meth:`from_arrays`. Only :mod:`apygis.model` touches
+    the tables themselves (``tests/test_model_privacy.py`` holds it).
     """
 
     def __init__(self, ext: str):
