@@ -32,9 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from apygis.errors import DegenerateGeometryError, MeasurementError, OrientationError
-from apygis.orient.lsq import gauss_newton
 from apygis.orient.collinearity import ExteriorOrientation, InteriorOrientation
 from apygis.orient.intersection import intersect
+from apygis.orient.lsq import gauss_newton
 from apygis.orient.rotation import rotation_derivatives, rotation_matrix
 
 __all__ = ["RELATIVE_PARAMETERS", "RelativeOrientationResult", "relative_orientation"]
