@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from apygis.errors import FormatError, RecordError
+from apygis.errors import FormatError
 from apygis.fileio import MAX_INT_DIGITS, MAX_JSON_DEPTH, check_str, loads_json
 from apygis.model.records import MAX_COORD  # the model's bound: readers refuse what it would
 
@@ -29,7 +29,6 @@ __all__ = [
     "bad_coord_rows",
     "check_coords",
     "check_str",
-    "exact",
     "is_ascii_digits",
     "loads_json",
 ]
@@ -64,27 +63,6 @@ def ascii_int(s: str | bytes, max_digits: int = MAX_INT_DIGITS, signed: bool = F
     if len(body) > max_digits:
         return None
     return -int(body) if s[:1] == "-" and signed else int(body)
-
-
-def exact(check, value):
-    r"""``check(value)`` (:func:`~apygis.model.map.check_ext`, ``check_map_id``), no line break.
-
-    Their regular expressions end in ``$``, which lets a final newline
-    through: a header's ``"r\n"`` would become a layer named ``r`` and a
-    line break.
-
-    >>> from apygis.model.map import check_ext
-    >>> exact(check_ext, "R")
-    'r'
-    >>> exact(check_ext, "r\n")
-    Traceback (most recent call last):
-    ...
-    apygis.errors.RecordError: 'r\n' holds a line break
-    """
-    out = check(value)
-    if "\n" in value:
-        raise RecordError(f"{value!r} holds a line break")
-    return out
 
 
 def bad_coord_rows(xyz) -> np.ndarray:

@@ -46,7 +46,7 @@ from apygis.formats._io import (
     read_bytes,
     stamp_path,
 )
-from apygis.formats._readguard import check_coords, exact, loads_json
+from apygis.formats._readguard import check_coords, loads_json
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, crs_string
 from apygis.model.records import (
     APY_CAPACITY,
@@ -200,8 +200,8 @@ def decode_layer(data: bytes, path=None) -> tuple[dict, Layer]:
         raise FormatError("checksum mismatch: the file is corrupt", path=path)
     facts = {"ext": ext, "id": map_id, "scale": scale or None}
     try:
-        facts["ext"] = exact(check_ext, ext)
-        facts["id"] = exact(check_map_id, map_id)
+        facts["ext"] = check_ext(ext)
+        facts["id"] = check_map_id(map_id)
     except ValueError as exc:
         raise FormatError(f"header: {exc}", path=path) from None
 

@@ -77,7 +77,7 @@ from apygis.errors import (
 )
 from apygis.formats import Driver
 from apygis.formats._io import atomic_write_many, read_bytes
-from apygis.formats._readguard import MAX_COORD, ascii_int, check_str, exact, loads_json
+from apygis.formats._readguard import MAX_COORD, ascii_int, check_str, loads_json
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, crs_string
 from apygis.model.polylines import export_lines, to_csr
 from apygis.model.records import (
@@ -782,10 +782,10 @@ def _header_from_tags(tags, path) -> dict:
         if not isinstance(v, types) or isinstance(v, bool):
             raise FormatError(f"{APPID} header record: bad {key} {v!r}", path=path)
     try:
-        exact(check_map_id, out["id"])
+        check_map_id(out["id"])
         if not all(isinstance(e, str) for e in out["layers"]):
             raise ValueError("layer extensions are strings")
-        out["layers"] = [exact(check_ext, e) for e in out["layers"]]
+        out["layers"] = [check_ext(e) for e in out["layers"]]
     except ValueError as exc:
         raise FormatError(f"{APPID} header record: {exc}", path=path) from None
     ent = out.get("entities")

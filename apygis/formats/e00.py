@@ -44,7 +44,7 @@ import numpy as np
 from apygis.errors import DriverError, FormatError, RecordError, ValueRangeError
 from apygis.formats import Driver
 from apygis.formats._io import atomic_write_many, check_resolution, read_bytes, significant_step
-from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows, exact, loads_json
+from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows, loads_json
 from apygis.formats._text import digit_columns, esri_wkt, put_right
 from apygis.model import topology
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
@@ -1345,7 +1345,7 @@ def _map_from(info: dict, meta: dict, path, layer_opt: str | None, tol: float) -
     try:
         crs = meta.get("CRS") or _crs_from_prj(info["prj"], path)
         scale = meta.get("SCALE")
-        mp = MapFile(exact(check_map_id, meta.get("ID", stem)), scale=scale, crs=crs)
+        mp = MapFile(check_map_id(meta.get("ID", stem)), scale=scale, crs=crs)
         mp.notes = meta.get("NOTES", "")
         layers = meta.get("LAYERS", "").split()
         for ext in layers:
