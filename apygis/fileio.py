@@ -55,6 +55,7 @@ import secrets
 import stat
 from collections.abc import Iterable
 from pathlib import Path
+from typing import NoReturn
 
 from apygis.errors import FileOverwriteError, FormatError, WriteError
 
@@ -201,7 +202,7 @@ def remove_stale_temps(directory, names: Iterable[str] | None = None) -> list[Pa
 
     d = Path(directory)
     wanted = None if names is None else set(names)
-    removed = []
+    removed: list[Path] = []
     try:
         entries = list(os.scandir(d))
     except OSError:
@@ -559,7 +560,7 @@ def loads_json(text: str | bytes, what: str | None = None, path=None, record: st
     apygis.errors.FormatError: o.json: photos[0].Xo: the number 1e400 is out of range: ...
     """
 
-    def fail(why: str, where: str | None = None):
+    def fail(why: str, where: str | None = None) -> NoReturn:
         at = ": ".join(w for w in (record, where) if w) or None
         msg = f"{what} is not UTF-8 JSON: {why}" if what else why
         raise FormatError(msg, path=path, record=at)

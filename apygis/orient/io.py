@@ -36,7 +36,7 @@ from apygis.orient.collinearity import ExteriorOrientation, InteriorOrientation
 from apygis.orient.height import HeightCorrection
 from apygis.orient.photo import PhotoOrientation
 from apygis.orient.realtime import MotorCalibration
-from apygis.orient.transforms import _TYPES, transform_from_dict
+from apygis.orient.transforms import _TYPES, _Transform, transform_from_dict
 
 __all__ = [
     "FORMAT_NAME",
@@ -73,7 +73,7 @@ class Orientation:
     """
 
     map_id: str | None = None
-    map_transform: object | None = None
+    map_transform: _Transform | None = None
     photos: tuple = ()
     height_correction: HeightCorrection | None = None
     motors: tuple = ()
