@@ -241,6 +241,8 @@ def _bulk_nums(used: np.ndarray, nums, n: int, what: str) -> np.ndarray:
 def _check_table(name: str, t: np.ndarray) -> None:
     """The values of a whole table: coordinates and codes (vectorised)."""
     what = {"symbols": "symbol", "line_points": "line point", "texts": "text"}[name]
+    names = t.dtype.names
+    assert names is not None  # a table is a structured array
     for axis in ("x", "y", "z"):
         v = t[axis]
         if not len(v) or (v.min() >= -MAX_COORD and v.max() <= MAX_COORD):  # NaN fails
@@ -252,11 +254,7 @@ def _check_table(name: str, t: np.ndarray) -> None:
                 f"{what} {t['num'][k]}: {axis.upper()} {t[axis][k]!r} is not finite or exceeds "
                 f"{MAX_COORD:g} in magnitude"
             )
-    if (
-        "code" in t.dtype.names
-        and len(t)
-        and not 0 <= t["code"].min() <= t["code"].max() <= MAX_CODE
-    ):
+    if "code" in names and len(t) and not 0 <= t["code"].min() <= t["code"].max() <= MAX_CODE:
         bad = (t["code"] < 0) | (t["code"] > MAX_CODE)
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
@@ -265,13 +263,15 @@ def _check_table(name: str, t: np.ndarray) -> None:
 
 def _as_records(records, dtype: np.dtype, what: str) -> np.ndarray:
     """``records`` as a fresh array of ``dtype`` (fields converted by name)."""
+    names = dtype.names
+    assert names is not None  # a record dtype (SYMBOL_DTYPE, ...) is structured
     arr = np.asarray(records)
     if arr.dtype == dtype:
         return np.array(arr, copy=True).reshape(-1)
-    if arr.dtype.names is None or not set(dtype.names) <= set(arr.dtype.names):
-        raise RecordError(f"{what} records need the fields {', '.join(dtype.names)}")
+    if arr.dtype.names is None or not set(names) <= set(arr.dtype.names):
+        raise RecordError(f"{what} records need the fields {', '.join(names)}")
     out = np.zeros(len(arr), dtype)
-    for name in dtype.names:
+    for name in names:
         out[name] = arr[name]
     return out
 
@@ -344,7 +344,7 @@ class Layer:
             np.array_equal(self.table(n), other.table(n)) for n in TABLES
         )
 
-    __hash__ = None
+    __hash__ = None  # type: ignore[assignment]  # mutable, so unhashable
 
     def copy(self) -> Layer:
         return Layer.from_arrays(self.ext, self.symbols, self.line_points, self.texts)
@@ -675,12 +675,21 @@ class Layer:
             lp["back"][fi] = NO_REF
         if bi is not None and bi == fi:  # two-point ring
             lp["fwd"][bi] = lp["back"][bi] = NO_REF
-        elif mutual_b and mutual_f and not _linked(lp, bi, fi):
+        elif (
+            mutual_b and mutual_f and bi is not None and fi is not None and not _linked(lp, bi, fi)
+        ):
             lp["fwd"][bi] = f
             lp["back"][fi] = b
         # A branch end: its neighbour along the branch takes its place at the junction.
         for ref, nb, mutual, ji in (("back", fi, mutual_f, bi), ("fwd", bi, mutual_b, fi)):
-            if not mutual or ji is None or mutual_b == mutual_f or _linked(lp, nb, ji):
+            # (mutual implies nb is not None; the check is for the type checker)
+            if (
+                not mutual
+                or nb is None
+                or ji is None
+                or mutual_b == mutual_f
+                or _linked(lp, nb, ji)
+            ):
                 continue
             side = next((s for s in ("side1", "side2") if lp[s][ji] == num), None)
             if side is not None and lp[ref][nb] == NO_REF:
@@ -693,7 +702,7 @@ class Layer:
             for k in hit:
                 lp[ref][k] = NO_REF
                 if ref in ("fwd", "back") and heir is not None and heir != k:
-                    if _linked(lp, heir, k):
+                    if _linked(lp, heir, int(k)):
                         continue
                     side = next((s for s in ("side1", "side2") if lp[s][heir] == NO_REF), None)
                     if side is not None:
@@ -904,7 +913,7 @@ class MapFile:
             and all(self.layers[k] == other.layers[k] for k in self.layers)
         )
 
-    __hash__ = None
+    __hash__ = None  # type: ignore[assignment]  # mutable, so unhashable
 
     def copy(self) -> MapFile:
         m = MapFile(self.id, self.scale, self.crs, self.notes)

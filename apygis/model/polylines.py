@@ -616,7 +616,11 @@ def rebuild(
 
             cs = topology.chains(ex)
             ex_chain[cs.order] = m + np.repeat(np.arange(len(cs)), cs.lengths())
-        ex_free = np.column_stack([ex["side1"] == NO_REF, ex["side2"] == NO_REF]) if e_n else None
+        ex_free = (
+            np.column_stack([ex["side1"] == NO_REF, ex["side2"] == NO_REF])
+            if e_n
+            else np.zeros((0, 2), bool)
+        )
 
         def chain(t: int) -> int:
             return int(chain_of[t]) if t < n else int(ex_chain[t - n])

@@ -45,6 +45,7 @@ from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -389,7 +390,7 @@ class SymbolLibrary(Mapping):
             return NotImplemented
         return self._names == other._names and np.array_equal(self._bitmaps, other._bitmaps)
 
-    __hash__ = None  # mutable
+    __hash__ = None  # type: ignore[assignment]  # mutable, so unhashable
 
     def __repr__(self):
         free = sum(self[c].is_free for c in range(1, NCODES))
@@ -650,7 +651,7 @@ def _show(s: str, limit: int = 30) -> str:
 
 
 def _parse(text: str, path) -> tuple[list[str], np.ndarray]:
-    def fail(lineno: int, message: str):
+    def fail(lineno: int, message: str) -> NoReturn:
         raise FormatError(message, path=path, record=f"line {lineno}")
 
     if text.startswith("\ufeff"):

@@ -225,7 +225,7 @@ def branches(lp: np.ndarray, cs: ChainSet | None = None) -> list[dict]:
     """
     if cs is None:
         cs = chains(lp)
-    out = []
+    out: list[dict] = []
     if len(lp) == 0:
         return out
     first = cs.order[cs.offsets[:-1]]
