@@ -1,0 +1,301 @@
+"""Writing a map as OGR layers: whole columns per layer (see :func:`apygis.formats.ogr.write`)."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from apygis.errors import DriverError
+from apygis.formats.ogr._common import _gdal, _WriteError, _xyz
+from apygis.formats.ogr.schema import (
+    _DBF_BYTES,
+    _SHP,
+    _SHP_CHUNK,
+    MAP_TABLE,
+    SCHEMA_VERSION,
+    _Format,
+    _points_text,
+    _schema_files,
+)
+from apygis.formats.ogr.wkb import _lines_wkb, _points_wkb
+from apygis.model.map import MapFile
+from apygis.model.records import (
+    MAX_CODE,
+    REF_FIELDS,
+)
+
+
+@dataclass
+class _Table:
+    """One OGR layer to write: whole columns."""
+
+    name: str
+    geometry_type: str | None
+    wkb: np.ndarray | None
+    fields: list[str]
+    data: list[np.ndarray]
+    masks: list[np.ndarray | None]
+
+
+def _symbol_names() -> np.ndarray:
+    from apygis.model.symbols import default_library
+
+    lib = default_library()
+    return np.array([lib.name(c) for c in range(MAX_CODE + 1)], dtype=object)
+
+
+def _header_rows(map_: MapFile, fmt: _Format, crs: str | None) -> _Table:
+    values = {
+        "crs": crs,
+        "notes": map_.notes,
+        "layers": ",".join(map_.layers),
+    }
+    if fmt is _SHP:
+        chunks = {k: _chunks(v or "") for k, v in values.items()}
+        rows = max(1, *(len(c) for c in chunks.values()))
+    else:
+        chunks = {k: [v] if v else [] for k, v in values.items()}
+        rows = 1
+    n = rows
+
+    def column(key):
+        col = np.array([None] * n, dtype=object)
+        for i, c in enumerate(chunks[key]):
+            col[i] = c
+        if key == "notes" and col[0] is None:
+            col[0] = ""
+        return col
+
+    def first(value, dtype):
+        arr = np.zeros(n, dtype=dtype)
+        mask = np.ones(n, dtype=bool)
+        if value is not None:
+            arr[0] = value
+            mask[0] = False
+        return arr, mask
+
+    version, vmask = first(SCHEMA_VERSION, np.int32)
+    scale, smask = first(map_.scale, np.int64)
+    ids = np.array([map_.id] + [None] * (n - 1), dtype=object)
+    return _Table(
+        name=MAP_TABLE,
+        geometry_type=None,
+        wkb=None,
+        fields=["apygis", "id", "scale", "crs", "notes", "layers"],
+        data=[version, ids, scale, column("crs"), column("notes"), column("layers")],
+        masks=[vmask, None, smask, None, None, None],
+    )
+
+
+def _chunks(text: str) -> list[str]:
+    """``text`` in pieces of about 60 characters, cut between two non-blank characters.
+
+    A DBF field loses leading and trailing blanks, so no piece may start or
+    end with one (only blanks at the very start or end of ``text`` are lost).
+    """
+    out = []
+    i = 0
+    n = len(text)
+    while i < n:
+        j = min(i + _SHP_CHUNK, n)
+        while j < n and (text[j - 1] == " " or text[j] == " "):
+            j += 1
+        out.append(text[i:j])
+        i = j
+    return out
+
+
+def _tables(map_: MapFile, fmt: _Format, crs: str | None) -> list[_Table]:
+    """Every OGR layer of the schema for ``map_`` (non-empty ones only), header first."""
+    from apygis.model.polylines import export_lines
+
+    out = [_header_rows(map_, fmt, crs)]
+    names = None
+    limit = _DBF_BYTES if fmt is _SHP else None
+    for lay in map_:
+        ext = lay.ext
+        sym = lay.symbols
+        if len(sym):
+            if names is None:
+                names = _symbol_names()
+            code = sym["code"].astype(np.int32)
+            out.append(
+                _Table(
+                    f"{ext}_symbols",
+                    "Point Z",
+                    _points_wkb(_xyz(sym)),
+                    ["num", "code", "name"],
+                    [sym["num"].astype(np.int64), code, names[np.clip(code, 0, MAX_CODE)]],
+                    [None, None, None],
+                )
+            )
+        lp = lay.line_points
+        if len(lp):
+            ls = export_lines(lay)
+            lengths = np.diff(ls.offsets)
+            for kind, gtype, sel in (
+                ("lines", "LineString Z", ~ls.closed & (lengths >= 2)),
+                ("areas", "Polygon Z", ls.closed),
+            ):
+                if not sel.any():
+                    continue
+                idx = np.flatnonzero(sel)
+                starts, stops = ls.offsets[idx], ls.offsets[idx + 1]
+                sub_len = stops - starts
+                sub_off = np.r_[0, np.cumsum(sub_len)].astype(np.int64)
+                take = np.repeat(starts - sub_off[:-1], sub_len) + np.arange(sub_off[-1])
+                coords = np.ascontiguousarray(ls.coords[take], dtype="<f8")
+                nums = ls.nums[take]
+                out.append(
+                    _Table(
+                        f"{ext}_{kind}",
+                        gtype,
+                        _lines_wkb(coords, sub_off, closed=kind == "areas"),
+                        ["code", "npoints", "points"],
+                        [
+                            ls.codes[idx].astype(np.int32),
+                            sub_len.astype(np.int32),
+                            _points_text(nums, sub_off, limit),
+                        ],
+                        [None, None, None],
+                    )
+                )
+        tx = lay.texts
+        if len(tx):
+            out.append(
+                _Table(
+                    f"{ext}_texts",
+                    "Point Z",
+                    _points_wkb(_xyz(tx)),
+                    ["num", "text"],
+                    [tx["num"].astype(np.int64), tx["text"].astype(object)],
+                    [None, None],
+                )
+            )
+        if len(lp):
+            out.append(
+                _Table(
+                    f"{ext}_line_points",
+                    "Point Z",
+                    _points_wkb(_xyz(lp)),
+                    ["num", "code", *REF_FIELDS],
+                    [lp["num"].astype(np.int64), lp["code"].astype(np.int32)]
+                    + [lp[r].astype(np.int64) for r in REF_FIELDS],
+                    [None] * 6,
+                )
+            )
+    return out
+
+
+def _write_table(path: Path, fmt: _Format, table: _Table, crs: str | None) -> None:
+    import pyogrio.raw
+
+    masks = table.masks if any(m is not None for m in table.masks) else None
+    _gdal(
+        lambda: pyogrio.raw.write(
+            str(path),
+            table.wkb,
+            table.data,
+            table.fields,
+            field_mask=masks,
+            layer=table.name if fmt.multi else path.stem,
+            driver=fmt.ogr,
+            geometry_type=table.geometry_type,
+            crs=crs if table.geometry_type is not None else None,
+            layer_options=fmt.layer_options or None,
+        ),
+        "cannot write",
+        path,
+        table.name,
+        error=_WriteError,
+    )
+
+
+def _file_names(table: _Table, fmt: _Format, prefix: str, ext: str, crs) -> list[str]:
+    base = f"{prefix}_{table.name}"
+    if fmt is not _SHP:
+        return [f"{base}.{ext}"]
+    if table.geometry_type is None:
+        return [f"{base}.dbf", f"{base}.cpg"]
+    names = [f"{base}.shp", f"{base}.shx", f"{base}.dbf", f"{base}.cpg"]
+    if crs is not None:
+        names.append(f"{base}.prj")
+    return names
+
+
+def _tables_skeleton(map_: MapFile) -> list[_Table]:
+    """The OGR layers a write produces, names and geometry types only (no data built)."""
+    from apygis.model.polylines import export_lines
+
+    out = [_Table(MAP_TABLE, None, None, [], [], [])]
+    for lay in map_:
+        if len(lay.symbols):
+            out.append(_Table(f"{lay.ext}_symbols", "Point Z", None, [], [], []))
+        if len(lay.line_points):
+            ls = export_lines(lay)  # a branch end gains its junction: a 1-point branch is a line
+            if (~ls.closed & (np.diff(ls.offsets) >= 2)).any():
+                out.append(_Table(f"{lay.ext}_lines", "LineString Z", None, [], [], []))
+            if ls.closed.any():
+                out.append(_Table(f"{lay.ext}_areas", "Polygon Z", None, [], [], []))
+        if len(lay.texts):
+            out.append(_Table(f"{lay.ext}_texts", "Point Z", None, [], [], []))
+        if len(lay.line_points):
+            out.append(_Table(f"{lay.ext}_line_points", "Point Z", None, [], [], []))
+    return out
+
+
+def _write_tables(
+    tmp: Path, fmt: _Format, tables, names, single: str | None, crs, progress, final: Path
+):
+    for k, table in enumerate(tables):
+        name = single if single is not None else names[table.name][0]
+        dest = tmp / name
+        try:
+            _write_table(dest, fmt, table, crs)
+        except _WriteError as exc:  # named by the target, not the temporary folder
+            where = ": ".join(x for x in (str(final / name), exc.record) if x)
+            raise DriverError(f"{where}: {exc.reason}") from None
+        if progress:
+            progress(k + 1, len(tables))
+
+
+@contextlib.contextmanager
+def _sqlite_unsynced(fmt: _Format):
+    """SQLite without a disk sync per transaction while a GeoPackage is written.
+
+    The file is a temporary one, synced once when complete and only then
+    renamed over the target, so the per-transaction syncs buy nothing (they
+    take most of the time of a GeoPackage of many layers). GDAL's
+    configuration is process-wide: the previous value is restored after.
+    """
+    if not fmt.multi:
+        yield
+        return
+    import pyogrio
+
+    key = "OGR_SQLITE_SYNCHRONOUS"
+    before = pyogrio.get_gdal_config_option(key)
+    pyogrio.set_gdal_config_options({key: "OFF"})
+    try:
+        yield
+    finally:
+        pyogrio.set_gdal_config_options({key: before})
+
+
+def _fsync(p: Path) -> None:
+    with open(p, "rb") as fh:
+        os.fsync(fh.fileno())
+
+
+def _stale(directory: Path, prefix: str, fmt: _Format, written: set[str]) -> list[Path]:
+    """Files of this prefix's schema that the write did not produce (to be removed).
+
+    They would be read back as part of the map: an OGR layer the map no
+    longer has, a ``.prj`` left from a map that had a CRS, a stale spatial
+    index. Only names of the schema with this prefix are touched.
+    """
+    return [p for p in _schema_files(directory, prefix, fmt) if p.name not in written]
