@@ -102,6 +102,18 @@ class Driver:
     def modes(self) -> str:
         return ("r" if self.reader else "") + ("w" if self.writer else "")
 
+    def function(self, mode: str) -> Callable:
+        """The ``reader`` (mode ``"r"``) or ``writer`` (``"w"``); DriverError if it has none.
+
+        For a driver chosen by :func:`get_driver` or :func:`driver_for` with
+        that mode the function is there (they check it).
+        """
+        func = self.reader if mode == "r" else self.writer
+        if func is None:
+            what = "read" if mode == "r" else "write"
+            raise DriverError(f"the {self.name} driver cannot {what}")
+        return func
+
     def targets(self, map_, path) -> list[Path]:
         if self.outputs is not None:
             return [Path(p) for p in self.outputs(map_, path)]
@@ -200,6 +212,8 @@ def driver_for(path, mode: str) -> Driver:
 
 
 def _safe_probe(d: Driver, p: Path) -> bool:
+    if d.probe is None:
+        return False
     try:
         return bool(d.probe(p))
     except OSError:
@@ -225,7 +239,7 @@ def read(path, driver: str | None = None, **options):
     drv = get_driver(driver, "r") if driver else driver_for(path, "r")
     log.debug("reading %s with the %s driver", path, drv.name)
     verify_set(drv, path)
-    return drv.reader(os.fspath(path), **options)
+    return drv.function("r")(os.fspath(path), **options)
 
 
 def verify_set(drv: Driver, path) -> None:
@@ -262,7 +276,7 @@ def write(map, path, driver: str | None = None, **options) -> list[Path]:
     drv = get_driver(driver, "w") if driver else driver_for(path, "w")
     log.debug("writing %s with the %s driver", path, drv.name)
     try:
-        out = drv.writer(map, os.fspath(path), **options)
+        out = drv.function("w")(map, os.fspath(path), **options)
     except ApygisError:
         raise
     except OSError as exc:  # a driver's own file handling: name the target, not the source

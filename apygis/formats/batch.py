@@ -114,7 +114,8 @@ def convert_file(
         in_drv = get_driver(src_driver, "r") if src_driver else driver_for(src, "r")
         opts = {**(read_options or {}), **step(0)}
         verify_set(in_drv, src)  # a set half-replaced by an interrupted write is refused
-        m = in_drv.reader(os.fspath(src), **_accepted(in_drv.reader, opts))
+        reader = in_drv.function("r")
+        m = reader(os.fspath(src), **_accepted(reader, opts))
         if to_crs is not None:
             from apygis.model.reproject import reproject
 
@@ -135,7 +136,9 @@ def convert_file(
                 verb = "exists" if len(existing) == 1 else "exist"
                 raise FileOverwriteError(f"{what} {verb}; use --overwrite")
         writing = True
-        written = apygis.write(m, dst, driver=out_drv.name, **_accepted(out_drv.writer, step(1)))
+        written = apygis.write(
+            m, dst, driver=out_drv.name, **_accepted(out_drv.function("w"), step(1))
+        )
         if progress is not None:
             progress(STEPS, STEPS)
         return Result(src, [str(p) for p in written], sum(len(lay) for lay in m), len(m.layers))
