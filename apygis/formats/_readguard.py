@@ -15,6 +15,8 @@ re-exported here for the readers.
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 
 from apygis.errors import FormatError
@@ -72,7 +74,8 @@ def bad_coord_rows(xyz) -> np.ndarray:
     with np.errstate(invalid="ignore"):
         bad = ~(np.abs(a) <= MAX_COORD)  # NaN compares False
     if bad.ndim > 1:
-        bad = bad.any(axis=tuple(range(1, bad.ndim)))
+        # with an axis, any() gives an array (the stubs also allow a scalar)
+        bad = cast(np.ndarray, bad.any(axis=tuple(range(1, bad.ndim))))
     return np.flatnonzero(bad)
 
 
