@@ -26,6 +26,8 @@ operations, not a Python loop per row.
 
 from __future__ import annotations
 
+from typing import Any, NoReturn
+
 import numpy as np
 
 from apygis.errors import FormatError
@@ -141,7 +143,7 @@ class _Reader:
         first_nl = data.find(b"\n")
         self.eol = b"\r\n" if first_nl > 0 and data[first_nl - 1 : first_nl] == b"\r" else b"\n"
 
-    def fail(self, msg: str, line: int | None = None):
+    def fail(self, msg: str, line: int | None = None) -> NoReturn:
         raise FormatError(msg, path=self.path, record=f"line {line or self.line_no}")
 
     def next_line(self) -> str | None:
@@ -198,7 +200,7 @@ class _Reader:
         self.block_start = start
         return m[:, :width]
 
-    def _explain_block(self, n: int, width: int, what: str):
+    def _explain_block(self, n: int, width: int, what: str) -> NoReturn:
         """Find the first row that is not ``width`` columns and say so."""
         for _ in range(n):
             save = self.pos
@@ -225,7 +227,9 @@ def _digits(m: np.ndarray) -> np.ndarray:
     return (m >= _ZERO) & (m <= _ZERO + 9)
 
 
-def _bad_row(rd: _Reader, bad: np.ndarray, col: int, width: int, name: str, expected: str, m):
+def _bad_row(
+    rd: _Reader, bad: np.ndarray | np.bool_, col: int, width: int, name: str, expected: str, m
+) -> NoReturn:
     i = int(np.flatnonzero(bad)[0])
     found = m[i, col : col + width].tobytes().decode("latin-1")
     rd.fail(
@@ -326,7 +330,7 @@ def decode(data: bytes, path=None) -> MapFile:
     first = rd.next_line()
     if first != MAGIC:
         rd.fail(f"not an APY ASCII file: the first line must be {MAGIC!r}")
-    header = {"id": None, "scale": None, "crs": None, "notes": []}
+    header: dict[str, Any] = {"id": None, "scale": None, "crs": None, "notes": []}
     m = None
     layer_parts: dict | None = None
     layer_ext = None
@@ -384,8 +388,8 @@ def decode(data: bytes, path=None) -> MapFile:
                 layer_parts[word] = _read_texts(rd, n)
             continue
         rd.fail(f"unexpected line {line[:40]!r}")
-    rest = rd.data[rd.pos :]
-    if rest.strip(b"\r\n\t "):
+    trailing = rd.data[rd.pos :]
+    if trailing.strip(b"\r\n\t "):
         rd.fail("data after END", line=rd.line_no + 1)
     if m is None:
         m = _make_map(rd, header)
