@@ -44,6 +44,7 @@ import shutil
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -237,9 +238,10 @@ def members(path, fmt) -> tuple[Path, list[Path], bool] | None:
     if p.is_dir():
         files = _schema_files(p, None, fmt)
         prefixes = {parsed[0] for f in files if (parsed := _parse_name(f.stem))}
-        if len(prefixes) != 1 or None in prefixes:
+        (prefix,) = prefixes if len(prefixes) == 1 else (None,)
+        if prefix is None:
             return None  # the reader refuses several maps; no prefix: not apygis's set
-        return stamp_path(p / prefixes.pop()), files, True
+        return stamp_path(p / prefix), files, True
     if p.suffix[1:].lower() in fmt.extensions and p.parent.is_dir():
         files = _schema_files(p.parent, p.stem, fmt)
         return stamp_path(p.parent / p.stem), files, True
@@ -304,7 +306,11 @@ def read(
         raise DriverError(f"default_code is an integer 0-{MAX_CODE}, not {default_code!r}")
     if not 0 <= default_code <= MAX_CODE:
         raise DriverError(f"default_code is 0-{MAX_CODE}, not {default_code}")
-    opts = {"default_code": int(default_code), "code_field": code_field, "text_field": text_field}
+    opts: dict[str, Any] = {
+        "default_code": int(default_code),
+        "code_field": code_field,
+        "text_field": text_field,
+    }
     sources, default_id = _sources(path, fmt)
 
     # which map layer and kind each source is
@@ -320,7 +326,7 @@ def read(
     for src in sources:
         parsed = _parse_name(src.name)
         kind = parsed[2] if parsed else None
-        if kind == "map":
+        if parsed is not None and kind == "map":
             header_src = header_src or src
             prefixes.add(parsed[0])
             continue
@@ -385,9 +391,8 @@ def read(
     if header is not None:
         map_id, scale, crs, notes = header["id"], header["scale"], header["crs"], header["notes"]
     else:
-        stem = default_id
-        if len(prefixes) == 1 and None not in prefixes:
-            stem = next(iter(prefixes))
+        (only,) = prefixes if len(prefixes) == 1 else (None,)
+        stem = only if only is not None else default_id
         map_id, scale, crs, notes = _default_id(stem), None, layer_crs, ""
     try:
         m = MapFile(check_map_id(map_id), scale=scale, crs=crs, notes=notes)
@@ -396,7 +401,8 @@ def read(
 
     for ext in order:
         tables = exact.get(ext, {})
-        lp, relinks = tables.get("line_points"), []
+        lp = tables.get("line_points")
+        relinks: list = []
         report = reports.setdefault(ext, _EditReport())
         if ext in edited and lp is not None:
             acc = _Foreign()
@@ -411,9 +417,9 @@ def read(
             line_points=lp,
             texts=tables.get("texts"),
         )
-        acc = foreign.get(ext)
-        if acc is not None:
-            lay = _add_foreign(lay, acc, tolerance_m, path, m.crs)
+        imported = foreign.get(ext)
+        if imported is not None:
+            lay = _add_foreign(lay, imported, tolerance_m, path, m.crs)
         if relinks:
             lay = _relink(lay, relinks, report)
         if report.parts:

@@ -123,7 +123,7 @@ def _as_int(v) -> int | None:
     if isinstance(v, (int, np.integer)):
         return int(v) if abs(int(v)) <= 2**62 else None
     if isinstance(v, (float, np.floating)) and np.isfinite(v) and float(v).is_integer():
-        return int(v) if abs(v) <= 2.0**62 else None
+        return int(v) if abs(float(v)) <= 2.0**62 else None
     if isinstance(v, str):
         try:
             return _as_int(int(v.strip()))

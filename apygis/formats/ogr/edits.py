@@ -233,7 +233,7 @@ def _relink(lay: Layer, relinks: list, report: _EditReport) -> Layer:
 
     lp = lay.line_points.copy()
     tree = cKDTree(np.column_stack([lp["x"], lp["y"]]))
-    extra = []
+    extra: list[np.void] = []
     joined = grown = 0
     for num, ref, xyz in relinks:
         r = int(lookup(lp["num"], np.array([num]))[0])

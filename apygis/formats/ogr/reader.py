@@ -72,7 +72,8 @@ def _sources(path, fmt: _Format) -> tuple[list[_Source], str]:
                 f"{p / ('NAME.' + fmt.ext)}",
                 path=p,
             )
-        default_id = next(iter(prefixes)) if prefixes and None not in prefixes else p.name
+        only = next(iter(prefixes), None)  # at most one here
+        default_id = only if only is not None else p.name
         if not files:
             raise FormatError(f"no {fmt.ogr} files ({'/'.join(fmt.extensions)}) here", path=p)
     else:
