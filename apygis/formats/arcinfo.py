@@ -54,6 +54,7 @@ import math
 import os
 import re
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -539,7 +540,7 @@ class _Tokens:
     def text(self, k: int) -> str:
         return self.mat[k, : self.lens[k]].tobytes().decode("latin-1")
 
-    def fail(self, msg: str, token: int | None = None, line: int | None = None):
+    def fail(self, msg: str, token: int | None = None, line: int | None = None) -> NoReturn:
         if line is None:
             line = int(self.line[token]) if token is not None else max(self.text_lines - 1, 0)
         raise FormatError(msg, path=self.path, record=f"line {line + 1}")
@@ -606,11 +607,11 @@ class _Tokens:
                         )
         bad = bad_coord_rows(v)
         if len(bad):
-            k = int(toks[bad[0]])
+            tok = int(toks[bad[0]])
             self.fail(
                 f"expected finite numbers ({names}) of at most {MAX_COORD:g} in magnitude, "
-                f"found {self.text(k)!r}",
-                k,
+                f"found {self.text(tok)!r}",
+                tok,
             )
         return v
 
@@ -786,7 +787,7 @@ class _Attributes:
     def __len__(self) -> int:
         return len(self.ids)
 
-    def fail(self, msg: str, row: int):
+    def fail(self, msg: str, row: int) -> NoReturn:
         raise FormatError(msg, path=self.path, record=f"line {self.lines[row]}")
 
     def has(self, name: str) -> bool:
@@ -804,9 +805,11 @@ class _Attributes:
         v = None if None in ints else np.array(ints, dtype=np.int64)
         if v is None or (len(v) and ((v < lo) | (v > hi)).any()):
             for j, s in enumerate(col):
-                ok = ints[j] is not None and lo <= ints[j] <= hi
+                x = ints[j]
+                ok = x is not None and lo <= x <= hi
                 if not ok:
                     self.fail(f"{name} must be an integer from {lo} to {hi}, not {s!r}", rows[j])
+        assert v is not None  # a value that is None (not an integer) failed above
         return v
 
     def reals(self, name: str, rows) -> np.ndarray:
@@ -828,6 +831,7 @@ class _Attributes:
                         f"magnitude, not {s[:40]!r}",
                         rows[j],
                     )
+        assert v is not None  # a value float() refuses failed above
         return v
 
     def rows_for(self, ids: np.ndarray) -> np.ndarray:
