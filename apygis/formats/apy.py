@@ -25,6 +25,7 @@ import logging
 import struct
 import zlib
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -155,7 +156,7 @@ def _ascii_field(raw: bytes, path, what: str) -> str:
         raise FormatError(f"header: the {what} is not ASCII: {text!r}", path=path) from None
 
 
-def decode_layer(data: bytes, path=None) -> tuple[dict, Layer]:
+def decode_layer(data: bytes, path=None) -> tuple[dict[str, Any], Layer]:
     """Parse one layer file. Returns ``(header facts, layer)``; raises FormatError."""
     if len(data) < HEADER_SIZE:
         raise FormatError(
@@ -198,7 +199,7 @@ def decode_layer(data: bytes, path=None) -> tuple[dict, Layer]:
         )
     if zlib.crc32(memoryview(data)[HEADER_SIZE:]) != crc:
         raise FormatError("checksum mismatch: the file is corrupt", path=path)
-    facts = {"ext": ext, "id": map_id, "scale": scale or None}
+    facts: dict[str, Any] = {"ext": ext, "id": map_id, "scale": scale or None}
     try:
         facts["ext"] = check_ext(ext)
         facts["id"] = check_map_id(map_id)
@@ -258,8 +259,8 @@ def decode_layer(data: bytes, path=None) -> tuple[dict, Layer]:
     tx["num"] = t["num"]
     tx["x"], tx["y"], tx["z"] = cm_to_m(t["x"]), cm_to_m(t["y"]), cm_to_m(t["z"])
     tx["text"] = decode_latin1(codes, TEXT_LEN)
-    for table, word in ((sym, "symbol"), (lp, "line point"), (tx, "text")):
-        xyz = np.column_stack([table["x"], table["y"], table["z"]])
+    for arr, word in ((sym, "symbol"), (lp, "line point"), (tx, "text")):
+        xyz = np.column_stack([arr["x"], arr["y"], arr["z"]])
         check_coords(xyz, path, lambda i, w=word: f"{w} record {i + 1}")
     return facts, Layer.from_arrays(facts["ext"], sym, lp, tx)
 
@@ -407,6 +408,7 @@ def read(path, progress=None) -> MapFile:
         m.add_layer(layer)
         if progress:
             progress(k + 1, len(files))
+    assert m is not None  # files is not empty
     return m
 
 
