@@ -20,7 +20,7 @@ reader rebuilds the map from ``L_symbols``, ``L_texts`` and ``L_line_points``
 a GIS user made to ``L_lines`` / ``L_areas`` (they win over ``L_line_points``,
 which keeps the topology of the lines whose feature still agrees with it) and
 to ``L_symbols`` / ``L_texts``; what was taken is logged (see
-:func:`_line_edits` and docs/formats/ogr.md, "Edited files").
+:mod:`apygis.formats.ogr.edits` and docs/formats/ogr.md, "Edited files").
 
 GeoPackage holds all of them in one file, OGR layer names as above. The
 single-layer formats write one file per OGR layer into a directory:
@@ -36,6 +36,14 @@ line points whose references are rebuilt by the model's one rebuild,
 :meth:`apygis.model.Layer.add_polylines` (its report logged). Writes go through pyogrio's vectorised
 numpy path (whole columns of WKB and attributes), into a temporary file or
 directory beside the target that is then renamed over it.
+
+The package: this module holds the four drivers (``GPKG``, ``SHP``,
+``GEOJSON``, ``FGB``, registered as ``apygis.formats.ogr:GPKG`` etc.), their
+probes, :func:`read`, :func:`write`, :func:`outputs` and :func:`members`;
+``schema`` the names of the schema and the formats table, ``wkb`` the WKB
+encoding and decoding, ``writer`` the tables a write produces, ``reader`` the
+exact schema and foreign data, ``edits`` the GIS edits and their report, and
+``_common`` the logger, the pyogrio guards and the column checks they share.
 """
 
 from __future__ import annotations

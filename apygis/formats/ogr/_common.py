@@ -1,4 +1,12 @@
-"""Shared helpers of the OGR drivers: the logger, pyogrio guards, a layer to read, its columns."""
+"""Shared helpers of the OGR drivers.
+
+The one logger of the package (``apygis.formats.ogr``: the edits report and
+the rebuild's report are logged under the driver's name), the guards that turn
+every pyogrio and GDAL failure into a :class:`~apygis.errors.FormatError`
+naming the file and the layer, :class:`_Source` (one OGR layer to read) and the
+checked conversions of its attribute columns (integers, codes, texts, NULLs)
+that the exact reader, the foreign reader and the edits share.
+"""
 
 from __future__ import annotations
 
@@ -12,11 +20,7 @@ import numpy as np
 
 from apygis.errors import FormatError
 from apygis.model.map import check_text
-from apygis.model.records import (
-    MAX_CODE,
-    NO_REF,
-    TEXT_DTYPE,
-)
+from apygis.model.records import MAX_CODE, NO_REF, TEXT_DTYPE
 
 log = logging.getLogger("apygis.formats.ogr")  # one logger for the package (the edits report)
 

@@ -1,4 +1,11 @@
-"""Edits a GIS user made to a file apygis wrote (docs/formats/ogr.md, "Edited files")."""
+"""Edits a GIS user made to a file apygis wrote (docs/formats/ogr.md, "Edited files").
+
+:func:`_line_edits` checks ``L_lines`` / ``L_areas`` against ``L_line_points``
+(they win: agreeing lines keep their exact topology, changed and new ones are
+imported as foreign lines, deleted ones dropped), :func:`_relink` joins kept
+branches whose junction went away, and :class:`_EditReport` collects what was
+taken into the one WARNING per map layer.
+"""
 
 from __future__ import annotations
 
@@ -12,12 +19,7 @@ from apygis.formats.ogr.reader import _Foreign, _foreign_layer
 from apygis.formats.ogr.schema import _points_text
 from apygis.formats.ogr.wkb import _from_wkb
 from apygis.model.map import Layer
-from apygis.model.records import (
-    LINE_DTYPE,
-    NO_REF,
-    REF_FIELDS,
-    next_numbers,
-)
+from apygis.model.records import LINE_DTYPE, NO_REF, REF_FIELDS, next_numbers
 
 
 @dataclass

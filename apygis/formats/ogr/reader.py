@@ -1,4 +1,12 @@
-"""Reading OGR layers: the exact schema record for record, foreign data through the rebuild."""
+"""Reading OGR layers (see :func:`apygis.formats.ogr.read`).
+
+The sources a path names (a file, a folder, a set ``dir/NAME.<ext>``), one
+layer's columns through pyogrio, the exact schema (``L_symbols``, ``L_texts``,
+``L_line_points``: record for record, features a GIS drew numbered anew), the
+header table, and foreign data: points, lines and polygon rings collected in a
+:class:`_Foreign` and added through the model's one rebuild,
+:meth:`apygis.model.Layer.add_polylines`.
+"""
 
 from __future__ import annotations
 
@@ -26,13 +34,7 @@ from apygis.formats.ogr.schema import SCHEMA_VERSION, _Format, _member_files, _p
 from apygis.formats.ogr.wkb import _check_finite, _from_wkb, _point_coords
 from apygis.model.map import Layer, check_ext
 from apygis.model.polylines import to_csr
-from apygis.model.records import (
-    LINE_DTYPE,
-    REF_FIELDS,
-    SYMBOL_DTYPE,
-    TEXT_DTYPE,
-    next_numbers,
-)
+from apygis.model.records import LINE_DTYPE, REF_FIELDS, SYMBOL_DTYPE, TEXT_DTYPE, next_numbers
 
 if TYPE_CHECKING:  # edits.py imports this module
     from apygis.formats.ogr.edits import _EditReport

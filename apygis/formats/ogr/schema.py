@@ -1,4 +1,11 @@
-"""Names of the OGR schema (docs/formats/ogr.md): the formats, OGR layer and file names."""
+"""Names of the OGR schema (docs/formats/ogr.md, "The schema").
+
+The four formats and what differs between them (:class:`_Format`), the OGR
+layer names ``[PREFIX_]L_<kind>`` and ``apygis_map`` (:func:`_parse_name`),
+the file names of the single-layer formats' sets, the ``points`` field of
+``L_lines`` / ``L_areas``, and the reader's mapping of OGR layers to map layers
+(``layer_map``, fallback extensions, a default map ID).
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,10 @@
-"""ISO WKB: Point Z and LineString/Polygon Z columns written as arrays, point columns read fast."""
+"""ISO WKB geometries as numpy columns.
+
+Writing: Point Z of a whole (n, 3) array at once, LineString Z and Polygon Z
+(one ring) per chain. Reading: a column of 29-byte Point Z values (ISO or EWKB)
+decoded as one structured array, anything else through shapely; every
+coordinate is checked (finite, within ``MAX_COORD``) before it reaches the model.
+"""
 
 from __future__ import annotations
 

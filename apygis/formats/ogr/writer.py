@@ -1,4 +1,10 @@
-"""Writing a map as OGR layers: whole columns per layer (see :func:`apygis.formats.ogr.write`)."""
+"""Writing a map as OGR layers (see :func:`apygis.formats.ogr.write`).
+
+Each OGR layer is a :class:`_Table` of whole columns (WKB and attributes)
+written with one ``pyogrio.raw.write`` call; the header table is cut into rows
+for a Shapefile's DBF. Also the file names of a set, the files a write leaves
+stale, and the GeoPackage's unsynced SQLite while its temporary file is written.
+"""
 
 from __future__ import annotations
 
@@ -23,10 +29,7 @@ from apygis.formats.ogr.schema import (
 )
 from apygis.formats.ogr.wkb import _lines_wkb, _points_wkb
 from apygis.model.map import MapFile
-from apygis.model.records import (
-    MAX_CODE,
-    REF_FIELDS,
-)
+from apygis.model.records import MAX_CODE, REF_FIELDS
 
 
 @dataclass
