@@ -1,0 +1,402 @@
+"""From the parsed sections and INFO tables to the model: :func:`read`."""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from apygis.errors import DriverError, FormatError, RecordError
+from apygis.formats._io import read_bytes
+from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows, loads_json
+from apygis.formats.e00._common import DEFAULT_LAYER, T_BINFLOAT, T_FIXNUM, log
+from apygis.formats.e00.parse import _Table, decode
+from apygis.model import topology
+from apygis.model.map import MapFile, check_ext, check_map_id, check_text
+from apygis.model.records import LINE_DTYPE, MAX_CODE, NO_REF
+
+# --------------------------------------------------------------------------- to the model
+
+
+def _table(tables: list[_Table], suffix: str, path) -> _Table | None:
+    found = [t for t in tables if t.name.upper().endswith(suffix)]
+    if len(found) > 1:
+        log.warning("%s: %d tables *%s; using %s", path, len(found), suffix, found[0].name)
+    return found[0] if found else None
+
+
+def _int_col(t: _Table, name: str, path) -> np.ndarray:
+    raw, it = t.raw(name)
+    raw = np.where(np.char.strip(raw) == b"", b"0", raw)
+    try:
+        return raw.astype(np.float64 if it[1] in (T_FIXNUM, T_BINFLOAT) else np.int64).astype(
+            np.int64
+        )
+    except (ValueError, OverflowError):
+        pass
+    for k, v in enumerate(raw):
+        try:
+            int(v)
+        except ValueError:
+            _bad(t, k, it, path, "an integer", v)
+    raise FormatError(f"INFO table {t.name}: item {name} out of range", path=path)
+
+
+def _float_col(t: _Table, name: str, path) -> np.ndarray:
+    raw, it = t.raw(name)
+    raw = np.where(np.char.strip(raw) == b"", b"0", raw)
+    try:
+        v = raw.astype(np.float64)
+        if not len(bad_coord_rows(v)):
+            return v
+    except ValueError:
+        pass
+    for k, s in enumerate(raw):
+        try:
+            ok = abs(float(s)) <= MAX_COORD  # False for NaN
+        except ValueError:
+            ok = False
+        if not ok:
+            _bad(t, k, it, path, f"a finite number of at most {MAX_COORD:g} in magnitude", s)
+    raise AssertionError  # pragma: no cover
+
+
+def _decode_text(b: bytes) -> str:
+    try:
+        return b.decode("utf-8")
+    except UnicodeDecodeError:
+        return b.decode("latin-1")
+
+
+def _str_col(t: _Table, name: str, nbytes: np.ndarray | None = None) -> np.ndarray:
+    """A character item as an object array of str (trailing blanks dropped, or cut to nbytes)."""
+    raw, _ = t.raw(name)
+    if nbytes is not None:
+        return np.array(
+            [_decode_text(b[: int(n)]) for b, n in zip(raw.tolist(), nbytes, strict=True)],
+            dtype=object,
+        )
+    uniq, inv = np.unique(raw, return_inverse=True)
+    words = np.array([_decode_text(b.rstrip(b" ")) for b in uniq.tolist()], dtype=object)
+    return words[inv.reshape(-1)] if len(raw) else np.zeros(0, object)
+
+
+def _bad(t: _Table, k: int, it, path, expected: str, found) -> None:
+    line = t.first_line + k * t.lines_per_record + it[3] // 80
+    raise FormatError(
+        f"INFO table {t.name}, record {k + 1}, item {it[0]}: expected {expected}, "
+        f"found {bytes(found).decode('latin-1')!r}",
+        path=path,
+        record=f"line {line}",
+    )
+
+
+def _need_items(t: _Table, names: tuple[str, ...]) -> bool:
+    return all(t.has(n) for n in names)
+
+
+_LPT_ITEMS = ("ARC#", "VERTEX", "LAYER", "NUM", "HEIGHT", "CODE", "FWD", "BACK", "SIDE1", "SIDE2")
+_PAT_ITEMS = ("LAYER", "KIND", "NUM", "CODE", "HEIGHT", "TXTLEN", "TEXT")
+
+
+def _meta(tables, path) -> dict[str, Any]:
+    t = _table(tables, ".APYMAP", path)
+    if t is None or not _need_items(t, ("KEY", "VALUE", "NBYTES")):
+        return {}
+    keys = _str_col(t, "KEY")
+    nbytes = _int_col(t, "NBYTES", path)
+    bad = (nbytes < 0) | (nbytes > 61)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        _bad(t, k, t.raw("NBYTES")[1], path, "a length 0-61", str(nbytes[k]).encode())
+    raw, _ = t.raw("VALUE")
+    joined: dict[str, bytes] = {}
+    for k, key in enumerate(keys):
+        joined[key] = joined.get(key, b"") + raw[k][: int(nbytes[k])]
+    out: dict[str, Any] = {}
+    for key, b in joined.items():
+        what = f"INFO table {t.name}: the {key} value"
+        value = loads_json(b'"' + b + b'"', what, path=path)
+        if not isinstance(value, str):  # pragma: no cover - quotes around it make a string
+            raise FormatError(f"{what} is not an escaped string", path=path)
+        out[key] = value
+    if "SCALE" in out:
+        scale = ascii_int(out["SCALE"].strip())
+        if scale is None:
+            raise FormatError(
+                f"INFO table {t.name}: the SCALE value {out['SCALE'][:40]!r} is not a "
+                "whole number (digits 0-9)",
+                path=path,
+            )
+        out["SCALE"] = scale
+    return out
+
+
+def _crs_from_prj(entries: list[str] | None, path):
+    if not entries:
+        return None
+    from pyproj import CRS
+    from pyproj.exceptions import CRSError
+
+    first = entries[0].lstrip().upper()
+    if first.startswith(("PROJCS", "GEOGCS", "GEOCCS", "COMPD_CS", "LOCAL_CS", "PROJCRS")):
+        try:
+            return CRS.from_wkt("".join(entries))
+        except CRSError as exc:
+            log.warning("%s: PRJ section is not a readable WKT (%s); no CRS", path, exc)
+            return None
+    keys = {}
+    for e in entries:
+        parts = e.split()
+        if len(parts) >= 2:
+            keys[parts[0].upper()] = parts[1].upper()
+    proj, datum = keys.get("PROJECTION"), keys.get("DATUM")
+    geo = {"NAD27": 4267, "NAD83": 4269, "WGS84": 4326}
+    code = None
+    if proj == "GEOGRAPHIC" and datum in geo:
+        code = geo[datum]
+    elif proj == "UTM" and datum in geo:
+        try:
+            zone = int(keys.get("ZONE", "0"))
+        except ValueError:
+            zone = 0
+        base = {"NAD27": 26700, "NAD83": 26900, "WGS84": 32600}[datum]
+        if 1 <= abs(zone) <= 60:
+            code = base + abs(zone) + (100 if zone < 0 and datum == "WGS84" else 0)
+    if code is None:
+        log.info("%s: PRJ section %s not translated; no CRS", path, keys)
+        return None
+    return CRS.from_epsg(code)
+
+
+def _map_from(info: dict, meta: dict, path, layer_opt: str | None, tol: float) -> MapFile:
+    tables = info["tables"]
+    stem = re.sub(r"[^A-Za-z0-9_-]", "_", Path(path).stem if path else "E00")[:32] or "E00"
+    try:
+        crs = meta.get("CRS") or _crs_from_prj(info["prj"], path)
+        scale = meta.get("SCALE")
+        mp = MapFile(check_map_id(meta.get("ID", stem)), scale=scale, crs=crs)
+        mp.notes = meta.get("NOTES", "")
+        layers = meta.get("LAYERS", "").split()
+        for ext in layers:
+            mp.layer(ext)
+    except (RecordError, ValueError) as exc:
+        raise FormatError(f"map metadata: {exc}", path=path) from None
+    default = check_ext(layer_opt) if layer_opt else (layers[0] if layers else DEFAULT_LAYER)
+    _lines_to_map(info, tables, mp, default, path, tol)
+    _labels_to_map(info, tables, mp, default, path)
+    return mp
+
+
+def _arc_arrays(arcs: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Arc numbers, vertex offsets and vertices (CSR) of the ARC sections read."""
+    ids = np.array([h[0] for h in arcs["heads"]], np.int64)
+    lens = np.concatenate(arcs["lens"]) if arcs["lens"] else np.zeros(0, np.int64)
+    xy = np.concatenate(arcs["xy"]) if arcs["xy"] else np.zeros((0, 2))
+    return ids, np.r_[0, np.cumsum(lens)].astype(np.int64), xy
+
+
+def _check_ext_col(t: _Table, values: np.ndarray, path) -> None:
+    for ext in set(values.tolist()):
+        try:
+            check_ext(ext)
+        except RecordError:
+            k = int(np.flatnonzero(values == ext)[0])
+            _bad(t, k, t.raw("LAYER")[1], path, "a layer extension (1-3 letters)", ext.encode())
+
+
+def _lines_to_map(info, tables, mp: MapFile, default: str, path, tol: float) -> None:
+    ids, off, xy = _arc_arrays(info["arcs"])
+    narc = len(ids)
+    aat = _table(tables, ".AAT", path)
+    if aat is not None and len(aat) != narc:
+        raise FormatError(
+            f"INFO table {aat.name} has {len(aat)} records for {narc} arcs", path=path
+        )
+    lpt = _table(tables, ".LINEPT", path)
+    if lpt is not None and _need_items(lpt, _LPT_ITEMS):
+        _lines_from_lpt(lpt, ids, off, xy, mp, path)
+        return
+    if narc == 0:
+        return
+    codes = np.zeros(narc, np.int64)
+    if aat is not None and aat.has("CODE"):
+        codes = _int_col(aat, "CODE", path)
+        bad = (codes < 0) | (codes > MAX_CODE)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            _bad(aat, k, aat.raw("CODE")[1], path, "a code 0-99", str(codes[k]).encode())
+    layer = mp.layer(default)
+    rep = layer.add_polylines(xy, off, codes, snap_m=tol, crs=mp.crs)
+    say = log.warning if rep.refused or rep.duplicates_removed or rep.empty else log.info
+    say("%s: layer %s: arcs rebuilt: %s", path, layer.ext, rep.message())
+
+
+def _lines_from_lpt(t: _Table, ids, off, xy, mp: MapFile, path) -> None:
+    n = len(t)
+    arc = _int_col(t, "ARC#", path)
+    vertex = _int_col(t, "VERTEX", path)
+    row = topology.lookup(ids, arc)
+    if n and (row < 0).any():
+        k = int(np.flatnonzero(row < 0)[0])
+        _bad(t, k, t.raw("ARC#")[1], path, "the number of an arc", str(arc[k]).encode())
+    nverts = off[1:] - off[:-1]
+    bad = (vertex < 1) | (vertex > nverts[row]) if n else np.zeros(0, bool)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        _bad(t, k, t.raw("VERTEX")[1], path, "a vertex of the arc", str(vertex[k]).encode())
+    layers = _str_col(t, "LAYER")
+    _check_ext_col(t, layers, path)
+    codes = _int_col(t, "CODE", path)
+    bad = (codes < 0) | (codes > MAX_CODE)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        _bad(t, k, t.raw("CODE")[1], path, "a code 0-99", str(codes[k]).encode())
+    rows = np.zeros(n, LINE_DTYPE)
+    rows["num"] = _int_col(t, "NUM", path)
+    pos = off[:-1][row] + vertex - 1 if n else np.zeros(0, np.int64)
+    rows["x"], rows["y"] = xy[pos, 0], xy[pos, 1]
+    rows["z"] = _float_col(t, "HEIGHT", path)
+    rows["code"] = codes
+    for f, item in (("fwd", "FWD"), ("back", "BACK"), ("side1", "SIDE1"), ("side2", "SIDE2")):
+        v = _int_col(t, item, path)
+        rows[f] = np.where(v < 0, NO_REF, v)
+    _, first = np.unique(layers, return_index=True)
+    for ext in layers[np.sort(first)].tolist():
+        _add_records(mp.layer(ext).add_line_points, path, rows[layers == ext])
+
+
+def _add_records(add, path, *args) -> None:
+    """A layer's bulk ``add_*`` method called with ``args``; what it refuses is a FormatError."""
+    try:
+        add(*args)
+    except RecordError as exc:
+        raise FormatError(str(exc), path=path) from None
+
+
+def _labels_to_map(info, tables, mp: MapFile, default: str, path) -> None:
+    lab = info["labels"]
+    value = np.concatenate(lab["ids"]) if lab["ids"] else np.zeros(0, np.int64)
+    xy = np.concatenate(lab["xy"]) if lab["xy"] else np.zeros((0, 2))
+    n = len(value)
+    pat = _table(tables, ".PAT", path)
+    if pat is not None and len(pat) != n:
+        raise FormatError(
+            f"INFO table {pat.name} has {len(pat)} records for {n} label points", path=path
+        )
+    if n == 0:
+        return
+    x, y = xy[:, 0], xy[:, 1]
+    if pat is None or not _need_items(pat, _PAT_ITEMS):
+        nums = value
+        if nums.min() < 0 or len(np.unique(nums)) != n:
+            log.warning("%s: label IDs negative or repeated; symbols numbered 1..%d", path, n)
+            nums = np.arange(1, n + 1)
+        z = np.zeros(n)
+        if pat is not None and pat.has("HEIGHT"):
+            z = _float_col(pat, "HEIGHT", path)
+        codes = np.zeros(n, np.int64)
+        if pat is not None and pat.has("CODE"):
+            codes = _int_col(pat, "CODE", path)
+            bad = (codes < 0) | (codes > MAX_CODE)
+            if bad.any():
+                k = int(np.flatnonzero(bad)[0])
+                _bad(pat, k, pat.raw("CODE")[1], path, "a code 0-99", str(codes[k]).encode())
+        _add_records(mp.layer(default).add_symbols, path, np.column_stack([x, y, z]), codes, nums)
+        return
+    layers = _str_col(pat, "LAYER")
+    _check_ext_col(pat, layers, path)
+    kinds = _str_col(pat, "KIND")
+    nums = _int_col(pat, "NUM", path)
+    codes = _int_col(pat, "CODE", path)
+    z = _float_col(pat, "HEIGHT", path)
+    tlen = _int_col(pat, "TXTLEN", path)
+    width = pat.raw("TEXT")[1][2]
+    bad = (tlen < 0) | (tlen > width)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        _bad(pat, k, pat.raw("TXTLEN")[1], path, f"a length 0-{width}", str(tlen[k]).encode())
+    bad = ~np.isin(kinds, ["S", "T"])
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        _bad(pat, k, pat.raw("KIND")[1], path, "S (symbol) or T (text)", kinds[k].encode())
+    is_text = kinds == "T"
+    bad = ~is_text & ((codes < 0) | (codes > MAX_CODE))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        _bad(pat, k, pat.raw("CODE")[1], path, "a code 0-99", str(codes[k]).encode())
+    raw_text = pat.raw("TEXT")[0]
+    texts = {}
+    for k in np.flatnonzero(is_text).tolist():
+        texts[k] = _decode_text(raw_text[k][: int(tlen[k])].ljust(int(tlen[k])))
+        try:
+            check_text(texts[k])
+        except RecordError as exc:
+            _bad(pat, k, pat.raw("TEXT")[1], path, f"a text ({exc})", texts[k].encode())
+    _, first = np.unique(layers, return_index=True)
+    for ext in layers[np.sort(first)].tolist():
+        lay = mp.layer(ext)
+        here = layers == ext
+        sel = np.flatnonzero(here & ~is_text)
+        xyz = np.column_stack([x, y, z])
+        if len(sel):
+            _add_records(lay.add_symbols, path, xyz[sel], codes[sel], nums[sel])
+        sel = np.flatnonzero(here & is_text)
+        if len(sel):
+            _add_records(lay.add_texts, path, xyz[sel], [texts[k] for k in sel.tolist()], nums[sel])
+
+
+# --------------------------------------------------------------------------- API
+
+
+def read(
+    path,
+    progress=None,
+    recover: bool = False,
+    tolerance_m: float = 0.005,
+    layer: str | None = None,
+) -> MapFile:
+    """Read an E00 file (compressed or not) into a map.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    progress : callable, optional
+        ``progress(done, total)``.
+    recover : bool
+        Read a damaged or truncated file as far as it goes (a warning names
+        the damage) instead of raising.
+    tolerance_m : float
+        For files apygis did not write: distance within which arc ends join
+        other arcs when the line topology is rebuilt.
+    layer : str, optional
+        For files apygis did not write: the layer extension of their records
+        (default ``"a"``).
+
+    Returns
+    -------
+    MapFile
+
+    Raises
+    ------
+    FormatError
+        Not an E00 file, a grid E00 file, or bad content (the message names
+        the line and what was expected).
+    """
+    try:
+        tol = float(tolerance_m)
+    except (TypeError, ValueError):
+        tol = math.nan
+    if not math.isfinite(tol) or tol < 0:
+        raise DriverError(f"tolerance_m is a distance in metres >= 0, not {tolerance_m!r}")
+    info = decode(read_bytes(path), path, recover=recover)
+    if progress:
+        progress(1, 2)
+    meta = _meta(info["tables"], path)
+    mp = _map_from(info, meta, path, layer, tol)
+    if progress:
+        progress(2, 2)
+    return mp
