@@ -38,7 +38,7 @@ TARGETS = {
 OTHERS = {
     "apygis.formats.batch.convert_file",
     "apygis.formats.batch.convert_many",
-    "apygis.formats.dxf.encode",
+    "apygis.formats.dxf.write.encode",
     "apygis.plot.drawing.build_drawing",
 }
 # called by the gpkg, shp, geojson and fgb drivers' readers and writers (closures)

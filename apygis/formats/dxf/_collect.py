@@ -1,0 +1,236 @@
+"""What both DXF readers share: the layer map option, the header record, and the
+records collected per layer."""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping
+
+import numpy as np
+
+from apygis.errors import DriverError, FormatError
+from apygis.formats._readguard import MAX_COORD, ascii_int, loads_json
+from apygis.formats.dxf._common import (
+    _BLOCK_RE,
+    _CTRL,
+    _EXT_LIKE,
+    APPID,
+    FORMAT_NAME,
+    FORMAT_VERSION,
+)
+from apygis.model.map import check_ext, check_map_id
+from apygis.model.records import MAX_CODE, TEXT_LEN
+
+# =========================================================================== options
+
+
+def parse_layer_map(value) -> dict[str, str | None]:
+    """A layer map from a dict or from the CLI form ``"ROADS=r,WATER=h"``.
+
+    Keys are DXF layer names (compared without regard to case, as DXF
+    does); values are layer extensions (1-3 letters), or ``None`` / ``"-"``
+    / ``""`` to skip the layer's entities. Returned with upper-case keys.
+
+    >>> parse_layer_map({"Roads": "R", "0": "-"})
+    {'ROADS': 'r', '0': None}
+    """
+    if value is None:
+        return {}
+    if isinstance(value, str):
+        items = []
+        for part in value.split(","):
+            if not part.strip():
+                continue
+            name, sep, ext = part.rpartition("=")
+            if not sep or not name.strip():
+                raise DriverError(
+                    f"dxf layer_map: expected DXF-LAYER=ext pairs separated by commas, "
+                    f"not {part.strip()!r}"
+                )
+            items.append((name.strip(), ext.strip()))
+    elif isinstance(value, Mapping):
+        items = list(value.items())
+    else:
+        raise DriverError(f"dxf layer_map: a dict or a string 'A=x,B=y', not {value!r}")
+    out: dict[str, str | None] = {}
+    for name, ext in items:
+        if not isinstance(name, str):
+            raise DriverError(f"dxf layer_map: a DXF layer name is a string, not {name!r}")
+        if ext is None or ext in ("", "-"):
+            out[name.upper()] = None
+            continue
+        try:
+            out[name.upper()] = check_ext(ext)
+        except ValueError as exc:
+            raise DriverError(f"dxf layer_map: layer {name!r}: {exc}") from None
+    return out
+
+
+class _LayerNames:
+    """DXF layer name -> map layer extension (or None: skip)."""
+
+    def __init__(self, layer_map, default_ext):
+        self.map = parse_layer_map(layer_map)
+        if default_ext is not None and default_ext not in ("", "-"):
+            try:
+                default_ext = check_ext(default_ext)
+            except ValueError as exc:
+                raise DriverError(f"dxf default_ext: {exc}") from None
+        else:
+            default_ext = None
+        self.default = default_ext
+        self._cache: dict[str, str | None] = {}
+
+    def __call__(self, name: str) -> str | None:
+        try:
+            return self._cache[name]
+        except KeyError:
+            pass
+        key = name.upper()
+        if key in self.map:
+            ext = self.map[key]
+        elif _EXT_LIKE.fullmatch(name):
+            ext = name.lower()
+        else:
+            ext = self.default
+        self._cache[name] = ext
+        return ext
+
+
+# --------------------------------------------------------------------------- the header record
+
+
+def _header_from_tags(tags, path) -> dict:
+    """The HEADER record's ``(code, value)`` tags, checked, as a dict."""
+    raw: dict[str, list[str]] = {}
+    key = None
+    for code, value in tags:
+        if code == 1:
+            key = str(value)
+            raw[key] = []
+        elif code == 3 and key is not None:
+            raw[key].append(str(value))
+        else:
+            raise FormatError(f"{APPID} header record: unexpected tag ({code}, {value!r})", path)
+    out = {}
+    for key, chunks in raw.items():
+        out[key] = loads_json("".join(chunks), f"{APPID} header record: {key!r}", path=path)
+    if out.get("format") != FORMAT_NAME:
+        raise FormatError(f"{APPID} header record: format is not {FORMAT_NAME!r}", path=path)
+    version = out.get("version")
+    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
+        raise FormatError(f"{APPID} header record: bad version {version!r}", path=path)
+    if version > FORMAT_VERSION:
+        raise FormatError(
+            f"written by a newer apygis (DXF mapping version {version}; this one reads "
+            f"{FORMAT_VERSION})",
+            path=path,
+        )
+    expect = {
+        "id": (str,),
+        "scale": (int, type(None)),
+        "crs": (str, type(None)),
+        "notes": (str,),
+        "layers": (list,),
+    }
+    for key, types in expect.items():
+        if key not in out:
+            raise FormatError(
+                f"{APPID} header record: no {key!r} entry (expected {', '.join(expect)})",
+                path=path,
+            )
+        v = out[key]
+        if not isinstance(v, types) or isinstance(v, bool):
+            raise FormatError(f"{APPID} header record: bad {key} {v!r}", path=path)
+    try:
+        check_map_id(out["id"])
+        if not all(isinstance(e, str) for e in out["layers"]):
+            raise ValueError("layer extensions are strings")
+        out["layers"] = [check_ext(e) for e in out["layers"]]
+    except ValueError as exc:
+        raise FormatError(f"{APPID} header record: {exc}", path=path) from None
+    ent = out.get("entities")
+    if (
+        isinstance(ent, list)
+        and len(ent) == 2
+        and all(isinstance(v, int) and not isinstance(v, bool) for v in ent)
+    ):
+        out["entities"] = tuple(ent)
+    else:
+        out["entities"] = None
+    return out
+
+
+# --------------------------------------------------------------------------- records
+
+
+class _Collect:
+    """What the entities of one map layer give, before it becomes a Layer."""
+
+    def __init__(self):
+        self.sym: list[tuple] = []  # (num or None, x, y, z, code)
+        self.txt: list[tuple] = []  # (num or None, x, y, z, text)
+        self.own: list[tuple] = []  # (row, num, code, fwd, back, s1, s2, x, y, z)
+        self.own_arr: list[tuple[np.ndarray, np.ndarray]] = []  # (ints (n, 7), xyz (n, 3))
+        self.own_nums: set[int] = set()  # line-point numbers read so far from own lines
+        self.lines: list[np.ndarray] = []
+        self.closed: list[bool] = []
+
+
+def _seed_layers(header: dict | None, names) -> dict[str, _Collect]:
+    collected: dict[str, _Collect] = {}
+    for ext in header["layers"] if header else []:
+        ext = names(ext)
+        if ext is not None:
+            collected.setdefault(ext, _Collect())
+    return collected
+
+
+def _xyz(v, what) -> tuple[float, float, float]:
+    x, y, z = float(v[0]), float(v[1]), float(v[2])
+    if not (abs(x) <= MAX_COORD and abs(y) <= MAX_COORD and abs(z) <= MAX_COORD):
+        raise FormatError(
+            f"{what}: coordinates ({x!r}, {y!r}, {z!r}) are not finite or exceed "
+            f"{MAX_COORD:g} in magnitude"
+        )
+    return x, y, z
+
+
+def _int_or_none(s) -> int | None:
+    """An optionally signed integer of ASCII digits (no '²', no '1_0'), else None."""
+    return ascii_int(str(s).strip(), signed=True)
+
+
+def _clean_text(s: str, stats: Counter) -> str:
+    s = _CTRL.sub(" ", s)
+    if len(s) > TEXT_LEN:
+        stats["truncated"] += 1
+        if stats["truncated"] == 1:
+            stats["first_truncated"] = s  # type: ignore[assignment]
+        s = s[:TEXT_LEN]
+    return s
+
+
+def _symbol_code(code_text, block_name, default: int) -> int:
+    """A symbol's code: attribute CODE, else block APY_SYM_NN, else the default."""
+    code = _int_or_none(code_text) if code_text is not None else None
+    if code is not None and 0 <= code <= MAX_CODE:
+        return code
+    m = _BLOCK_RE.match(str(block_name))
+    return int(m.group(1)) if m else default
+
+
+def _own_text(xd: str, raw_text: str, what: str) -> tuple[int, str] | None:
+    """Number and text of a TEXT with apygis XDATA; None for a spot-height label."""
+    parts = xd.split()
+    if parts == ["H"]:
+        return None
+    num = _int_or_none(parts[1]) if len(parts) in (2, 3) and parts[0] == "T" else None
+    if num is None:
+        raise FormatError(f"{what}: bad {APPID} XDATA {xd!r}")
+    if len(parts) == 3:
+        try:
+            return num, bytes.fromhex(parts[2]).decode("utf-8")
+        except ValueError:
+            raise FormatError(f"{what}: bad text in {APPID} XDATA") from None
+    return num, raw_text

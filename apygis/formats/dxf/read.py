@@ -1,0 +1,291 @@
+"""Reading DXF: :func:`probe`, and :func:`read` by the fast path or through ezdxf,
+then the map's layers."""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from apygis.errors import DriverError, FormatError, RecordError, TopologyError
+from apygis.formats._io import read_bytes
+from apygis.formats.dxf._collect import _Collect, _LayerNames
+from apygis.formats.dxf._common import _BINARY_SENTINEL, log
+from apygis.formats.dxf.read_ezdxf import _slow_read
+from apygis.formats.dxf.read_fast import _fast_read
+from apygis.model.map import Layer, MapFile
+from apygis.model.polylines import to_csr
+from apygis.model.records import LINE_DTYPE, MAX_CODE, TEXT_LEN, next_numbers
+
+# =========================================================================== read
+
+
+def _sniff(data: bytes, path) -> None:
+    """Raise FormatError unless ``data`` begins like a DXF file."""
+    if not data.strip():
+        raise FormatError("empty file, not a DXF file", path=path)
+    if data.startswith(_BINARY_SENTINEL):
+        if not data.rstrip(b"\0").endswith(b"EOF"):
+            raise FormatError("truncated: the binary DXF file does not end with EOF", path=path)
+        return
+    if not _looks_like_dxf(data[:4096]):
+        raise FormatError(
+            "not a DXF file: it does not begin with group code 0 and SECTION", path=path
+        )
+    # ezdxf's recovery accepts a file cut short and returns what it could
+    # read; a DXF file ends with the tags 0 and EOF, so refuse one without.
+    tail = [ln.strip().upper() for ln in data[-256:].rstrip(b" \t\r\n\0\x1a").splitlines()]
+    if tail[-2:] != [b"0", b"EOF"]:
+        raise FormatError("truncated: the file does not end with the tags 0 and EOF", path=path)
+
+
+def _looks_like_dxf(head: bytes) -> bool:
+    if head.startswith(_BINARY_SENTINEL):
+        return True
+    text = head.decode("latin-1")
+    if text.startswith("\xef\xbb\xbf"):
+        text = text[3:]
+    lines = [ln.strip() for ln in text.splitlines()]
+    while lines and not lines[0]:
+        lines.pop(0)
+    i = 0
+    while i + 1 < len(lines) and lines[i] == "999":  # comments
+        i += 2
+    return i + 1 < len(lines) and lines[i] == "0" and lines[i + 1].upper() == "SECTION"
+
+
+def probe(path) -> bool:
+    """True if ``path`` is a file that begins like a DXF file (ASCII or binary)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return False
+    return _looks_like_dxf(head)
+
+
+# --------------------------------------------------------------------------- layers
+
+
+def _numbers(given: list, path, what: str) -> np.ndarray:
+    """Point numbers: the given ones, new ones by the model's numbering rule for the rest."""
+    missing = np.array([g is None for g in given], dtype=bool)
+    try:
+        known = np.array([g for g in given if g is not None], dtype=np.int64)
+    except OverflowError:
+        raise FormatError(f"a {what} number does not fit 64 bits", path=path) from None
+    nums = np.full(len(given), -1, dtype=np.int64)
+    nums[~missing] = known
+    # a later copy of a number in use (an entity copied in CAD with its XDATA) or a
+    # negative number is numbered anew, and the log says how many
+    order = np.argsort(nums, kind="stable")
+    repeat = np.zeros(len(nums), dtype=bool)
+    repeat[order[1:]] = nums[order][1:] == nums[order][:-1]
+    renumber = ~missing & (repeat | (nums < 0))
+    if renumber.any():
+        log.warning(
+            "%s: %d %s number(s) repeated or negative (e.g. %d): numbered anew",
+            path,
+            int(renumber.sum()),
+            what,
+            int(nums[renumber][0]),
+        )
+    new = missing | renumber
+    nums[new] = next_numbers(nums[~new], int(new.sum()))
+    return nums
+
+
+def _make_layer(ext: str, c: _Collect, opts: dict, path) -> Layer:
+    layer = Layer(ext)
+    try:
+        if c.sym:
+            arr = np.array([s[1:4] for s in c.sym], dtype=float)
+            nums = _numbers([s[0] for s in c.sym], path, "symbol")
+            layer.add_symbols(arr, np.array([s[4] for s in c.sym], np.int64), nums)
+        if c.txt:
+            arr = np.array([t[1:4] for t in c.txt], dtype=float)
+            nums = _numbers([t[0] for t in c.txt], path, "text")
+            layer.add_texts(arr, [t[4] for t in c.txt], nums)
+        chunks = list(c.own_arr)
+        if c.own:
+            try:
+                ints = np.array([o[:7] for o in c.own], dtype=np.int64)
+            except OverflowError:
+                raise FormatError("a line point number does not fit 64 bits", path=path) from None
+            chunks.append((ints, np.array([o[7:] for o in c.own], dtype=float)))
+        if chunks:
+            ints = np.concatenate([ch[0] for ch in chunks])
+            xyz = np.concatenate([ch[1] for ch in chunks])
+            order = np.argsort(ints[:, 0], kind="stable")  # table order, from the rows
+            ints, xyz = ints[order], xyz[order]
+            lp = np.zeros(len(ints), LINE_DTYPE)
+            for j, name in enumerate(("num", "code", "fwd", "back", "side1", "side2"), start=1):
+                lp[name] = ints[:, j]
+            lp["x"], lp["y"], lp["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+            layer.add_line_points(lp)
+        if c.lines:
+            coords, offsets = to_csr(c.lines)
+            rep = layer.add_polylines(
+                coords,
+                offsets,
+                opts["line_code"],
+                np.array(c.closed, dtype=bool),
+                snap_m=opts["tolerance_m"],
+                crs=opts.get("crs"),
+                join=bool(opts["topology"]),
+            )
+            say = log.warning if rep.refused or rep.duplicates_removed or rep.empty else log.info
+            say("%s: layer %s: lines rebuilt: %s", path, ext, rep.message())
+    except (RecordError, TopologyError) as exc:
+        msg = str(exc) if str(exc).startswith(f"layer {ext}:") else f"layer {ext}: {exc}"
+        raise FormatError(msg, path=path) from None
+    return layer
+
+
+def _map_id(path) -> str:
+    stem = Path(path).stem
+    mid = re.sub(r"[^A-Za-z0-9_-]", "_", stem)[:32]
+    return mid or "DXF"
+
+
+def read(
+    path,
+    progress=None,
+    layer_map=None,
+    default_ext: str | None = "x",
+    symbol_code: int = 0,
+    line_code: int = 0,
+    tolerance_m: float = 0.005,
+    topology: bool = True,
+    sagitta_m: float = 0.01,
+    crs=None,
+    fast: bool = True,
+) -> MapFile:
+    """Read a DXF file as a map.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    progress : callable, optional
+        ``progress(done, total)`` over the model-space entities.
+    layer_map : dict or str, optional
+        DXF layer name -> layer extension (see :func:`parse_layer_map`);
+        ``"ROADS=r,WATER=h,0=-"`` in the CLI form.
+    default_ext : str or None
+        The layer for entities of DXF layers that neither ``layer_map`` names
+        nor are named like an extension (1-3 letters); None skips them.
+    symbol_code : int
+        Code of symbols from POINTs and from INSERTs that carry no code
+        (attribute ``CODE``, block name ``APY_SYM_NN``). 0 is the spot height.
+    line_code : int
+        Code of lines read from plain DXF geometry.
+    tolerance_m : float
+        Distance within which line ends join other lines (see
+        :meth:`apygis.model.Layer.add_polylines`).
+    topology : bool
+        Rebuild junctions and merge lines whose ends meet (default); with
+        False every DXF line becomes one chain as it is.
+    sagitta_m : float
+        Largest distance of a chord from the curve when ARC, CIRCLE,
+        ELLIPSE and SPLINE are flattened to line points.
+    crs : optional
+        The CRS of a DXF that apygis did not write (DXF has none), or one
+        that overrides the header's.
+    fast : bool
+        Read a DXF that apygis wrote and nobody changed since (the header
+        record's checksum of the entities matches) by apygis's own parser,
+        not through ezdxf (the same result, 100 times faster). False always
+        reads through ezdxf.
+
+    Returns
+    -------
+    MapFile
+
+    Raises
+    ------
+    FormatError
+        The file is missing, not DXF, or damaged beyond repair; or apygis's
+        own records in it (XDATA, header record) are malformed.
+    DriverError
+        An option is invalid.
+    """
+    for name, value in (("symbol_code", symbol_code), ("line_code", line_code)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise DriverError(f"dxf {name}: an integer 0-{MAX_CODE}, not {value!r}")
+        if not 0 <= value <= MAX_CODE:
+            raise DriverError(f"dxf {name}: {value} is outside 0-{MAX_CODE}")
+    try:
+        tolerance_m = float(tolerance_m)
+        sagitta_m = float(sagitta_m)
+    except (TypeError, ValueError):
+        raise DriverError("dxf tolerance_m and sagitta_m are numbers") from None
+    if not sagitta_m > 0 or not tolerance_m >= 0:
+        raise DriverError("dxf: sagitta_m must be > 0 and tolerance_m >= 0")
+    names = _LayerNames(layer_map, default_ext)
+    opts = {
+        "symbol_code": int(symbol_code),
+        "line_code": int(line_code),
+        "tolerance_m": tolerance_m,
+        "topology": bool(topology),
+        "sagitta_m": sagitta_m,
+    }
+    data = read_bytes(path)
+    _sniff(data, path)
+    stats: Counter = Counter()
+    got = _fast_read(data, path, names, opts, stats) if fast else None
+    if got is None:
+        stats.clear()
+        header, collected = _slow_read(data, path, names, opts, stats, progress)
+    else:
+        header, collected = got
+        log.debug("%s: read by apygis's own parser (the entities are as written)", path)
+        if progress:
+            progress(1, 1)
+    del data
+    try:
+        if header is not None:
+            m = MapFile(header["id"], header["scale"], header["crs"], header["notes"])
+        else:
+            m = MapFile(_map_id(path))
+        if crs is not None:
+            m.crs = crs
+    except ValueError as exc:  # RecordError
+        raise FormatError(f"map header: {exc}", path=path) from None
+    _report(path, stats)
+    opts["crs"] = m.crs  # tolerance_m is metres: the rebuild converts it to the CRS's units
+    for ext, c in collected.items():
+        m.add_layer(_make_layer(ext, c, opts, path))
+    return m
+
+
+def _report(path, stats: Counter) -> None:
+    skipped = {k[5:]: v for k, v in stats.items() if k.startswith("skip:")}
+    if skipped:
+        log.info(
+            "%s: entities not read: %s",
+            path,
+            ", ".join(f"{k} x{v}" for k, v in sorted(skipped.items())),
+        )
+    if stats["truncated"]:
+        log.warning(
+            "%s: %d texts longer than %d characters were truncated (first: %r)",
+            path,
+            stats["truncated"],
+            TEXT_LEN,
+            stats.get("first_truncated"),
+        )
+    if stats["copied lines"]:
+        log.warning(
+            "%s: %d apygis line(s) repeat point numbers read before (copied in CAD): "
+            "read as new lines, their topology rebuilt",
+            path,
+            stats["copied lines"],
+        )
+    if stats["bulges"]:
+        log.info(
+            "%s: %d LWPOLYLINEs have arcs (bulges); read as their vertices only",
+            path,
+            stats["bulges"],
+        )
