@@ -38,6 +38,13 @@ apygis wrote and nobody changed since (the header record holds the size and
 CRC-32 of the entities section) is parsed by the writer's own templates
 instead of ezdxf: the same records, a hundred times faster.
 
+The package: :mod:`~apygis.formats.dxf.templates` (symbol blocks, the text of
+each entity), :mod:`~apygis.formats.dxf.write`, and :mod:`~apygis.formats.dxf.read`
+(:func:`probe`, :func:`read`, the map's layers) over
+:mod:`~apygis.formats.dxf.read_fast` and :mod:`~apygis.formats.dxf.read_ezdxf`, which
+share ``_collect`` (the layer map option, the header record, the records per layer);
+``_common`` holds the constants.
+
 Examples
 --------
 >>> import tempfile, os

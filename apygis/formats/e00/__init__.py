@@ -28,6 +28,12 @@ files (a ``GRD`` section) are refused.
 
 GDAL's AVCE00 driver reads the files written here as layers ``ARC`` (the AAT
 items joined) and ``LAB`` (the PAT items joined).
+
+The package: :mod:`~apygis.formats.e00.write` (a map to E00 text),
+:mod:`~apygis.formats.e00.compress` (the decompressor of ``EXP  1`` files),
+:mod:`~apygis.formats.e00.parse` (E00 sections to plain arrays and INFO tables) and
+:mod:`~apygis.formats.e00.mapping` (those to the model: :func:`read`); ``_common``
+holds the constants they share.
 """
 
 from __future__ import annotations
