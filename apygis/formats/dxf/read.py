@@ -19,8 +19,6 @@ from apygis.model.map import Layer, MapFile
 from apygis.model.polylines import to_csr
 from apygis.model.records import LINE_DTYPE, MAX_CODE, TEXT_LEN, next_numbers
 
-# =========================================================================== read
-
 
 def _sniff(data: bytes, path) -> None:
     """Raise FormatError unless ``data`` begins like a DXF file."""

@@ -24,8 +24,6 @@ from apygis.formats.dxf._common import _ENTITIES_END, _ENTITIES_START, FORMAT_NA
 from apygis.formats.dxf.templates import _INSERT, _POLYLINE, _SEQEND, _TEXT, _VERTEX, _VERTEX_OWN
 from apygis.model.records import MAX_CODE
 
-# --------------------------------------------------------------------------- fast path
-
 
 def _template_re(template: str) -> re.Pattern:
     """A regular expression matching what a writer template formats, fields captured."""

@@ -1,4 +1,4 @@
-"""Constants shared by the E00 writer and reader."""
+"""Constants shared by the E00 writer and reader, and the width of an INFO item in E00."""
 
 from __future__ import annotations
 

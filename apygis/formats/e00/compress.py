@@ -7,8 +7,6 @@ from typing import NoReturn
 from apygis.errors import FormatError
 from apygis.formats.e00._common import _NL
 
-# --------------------------------------------------------------------------- decompress
-
 
 def decompress(data: bytes, path=None) -> bytes:
     """The uncompressed text of a compressed E00 file (``EXP  1``).

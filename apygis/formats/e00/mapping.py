@@ -18,8 +18,6 @@ from apygis.model import topology
 from apygis.model.map import MapFile, check_ext, check_map_id, check_text
 from apygis.model.records import LINE_DTYPE, MAX_CODE, NO_REF
 
-# --------------------------------------------------------------------------- to the model
-
 
 def _table(tables: list[_Table], suffix: str, path) -> _Table | None:
     found = [t for t in tables if t.name.upper().endswith(suffix)]

@@ -24,8 +24,6 @@ from apygis.formats.e00._common import (
 )
 from apygis.formats.e00.compress import decompress
 
-# --------------------------------------------------------------------------- decode
-
 
 @dataclass
 class _Table:
