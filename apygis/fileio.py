@@ -320,7 +320,8 @@ def prepare(contents: dict, *, parents: bool = False) -> list[Pending]:
     """
     pending: list[Pending] = []
     try:
-        for target, data in contents.items():
+        reals = []
+        for target in contents:
             target = Path(target)
             real = check_target(target)
             if parents:
@@ -328,7 +329,13 @@ def prepare(contents: dict, *, parents: bool = False) -> list[Pending]:
                     real.parent.mkdir(parents=True, exist_ok=True)
                 except OSError as exc:
                     raise write_failed(target, exc) from None
-            remove_stale_temps(real.parent, [real.name])
+            reals.append((target, real))
+        by_dir: dict[Path, list[str]] = {}
+        for _, real in reals:
+            by_dir.setdefault(real.parent, []).append(real.name)
+        for directory, names in by_dir.items():  # one listing per folder, not per file
+            remove_stale_temps(directory, names)
+        for (target, real), data in zip(reals, contents.values(), strict=True):
             tmp = temp_name(real)
             _write_temp(tmp, data, target)
             pending.append((tmp, real, target))

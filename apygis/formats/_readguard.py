@@ -71,6 +71,9 @@ def bad_coord_rows(xyz) -> np.ndarray:
     """Indices of the rows of ``xyz`` (or of the values of a 1-D array) that are not
     finite or exceed :data:`MAX_COORD` in magnitude."""
     a = np.asarray(xyz, dtype=np.float64)
+    # fast path: the extremes within bounds (a NaN makes them NaN, failing both tests)
+    if a.size == 0 or (a.min() >= -MAX_COORD and a.max() <= MAX_COORD):
+        return np.zeros(0, dtype=np.intp)
     with np.errstate(invalid="ignore"):
         bad = ~(np.abs(a) <= MAX_COORD)  # NaN compares False
     if bad.ndim > 1:

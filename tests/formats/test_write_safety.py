@@ -393,3 +393,23 @@ def test_a_hostile_stamp_is_one_clear_error(sample_map, tmp_path, stamp):
     (tmp_path / ".ZH1091.apyset").write_bytes(stamp)
     with pytest.raises(FormatError, match=r"\.ZH1091\.apyset: not an apygis set stamp"):
         apygis.read(tmp_path / "ZH1091")
+
+
+def test_an_untouched_set_is_verified_without_hashing_a_copied_one_by_hash(
+    sample_map, tmp_path, monkeypatch
+):
+    """The stamp records each file's inode and modification time (kept by the rename),
+    so reading an untouched set hashes nothing; a copy (new inodes) is hashed."""
+    import shutil
+
+    from apygis.formats import _io
+
+    apygis.write(sample_map, tmp_path / "a" / "ZH1091")
+    shutil.copytree(tmp_path / "a", tmp_path / "b")  # copy2: same times, new inodes
+    hashed = []
+    real_entry = _io._file_entry
+    monkeypatch.setattr(_io, "_file_entry", lambda p: hashed.append(p) or real_entry(p))
+    assert apygis.read(tmp_path / "a" / "ZH1091") == sample_map
+    assert hashed == []
+    assert apygis.read(tmp_path / "b" / "ZH1091") == sample_map
+    assert len(hashed) == len(sample_map.layers)
