@@ -31,6 +31,11 @@ from apygis.formats.ogr.wkb import _lines_wkb, _points_wkb
 from apygis.model.map import MapFile
 from apygis.model.records import MAX_CODE, REF_FIELDS
 
+#: The GeoPackage version written (GDAL's ``VERSION`` creation option). GDAL
+#: 3.6 (Debian 12, QGIS LTR builds) warns at every open of a 1.4 file, and
+#: the schema uses nothing newer than 1.2; set "1.4" (or "AUTO") to change it.
+GPKG_VERSION = "1.2"
+
 
 @dataclass
 class _Table:
@@ -210,6 +215,7 @@ def _write_table(path: Path, fmt: _Format, table: _Table, crs: str | None) -> No
             geometry_type=table.geometry_type,
             crs=crs if table.geometry_type is not None else None,
             layer_options=fmt.layer_options or None,
+            dataset_options={"VERSION": GPKG_VERSION} if fmt.ogr == "GPKG" else None,
         ),
         "cannot write",
         path,
