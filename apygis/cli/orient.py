@@ -4,11 +4,12 @@
 ``apygis orient photos PHOTOFILE CONTROL MEASUREMENTS`` orients each photo by
 the APY parallax conditions. Both print the control points with their
 residuals and the RMSE in position, and with ``-o FILE`` put their result
-into an orientation file (docs/formats/orientation.md): an existing file is
-read and only the part computed here is replaced, so ``orient map -o F`` and
-``orient photos -o F`` build one file together. Points are rejected with
-``--reject`` and the command re-run (the seed: "points can now be rejected or
-added, followed by a recalculation").
+into an orientation file (docs/formats/orientation.md). An existing file is
+refused without ``--overwrite``, like every command's output; with it, the
+file is read and only the part computed here is replaced, so ``orient map
+-o F`` and ``orient photos -o F --overwrite`` build one file together. Points
+are rejected with ``--reject`` and the command re-run (the seed: "points can
+now be rejected or added, followed by a recalculation").
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from pathlib import Path
 import click
 
 from apygis.cli._common import run_guarded
-from apygis.errors import MeasurementError
+from apygis.errors import FileOverwriteError, MeasurementError
 from apygis.orient.io import Orientation, load_orientation, save_orientation
 from apygis.orient.photo import orient_photo
 from apygis.orient.readers import (
@@ -61,9 +62,14 @@ def _save(o: Orientation, output: Path) -> None:
     click.echo(f"wrote {output}")
 
 
-def _existing(path: Path | None) -> Orientation:
-    """The orientation file to update; a directory or a broken link there is a FormatError."""
+def _existing(path: Path | None, overwrite: bool) -> Orientation:
+    """The orientation file to update; a directory or a broken link there is a FormatError.
+
+    An existing file (or anything else at ``path``) is refused without ``--overwrite``.
+    """
     if path is not None and os.path.lexists(path):
+        if not overwrite:
+            raise FileOverwriteError(f"{path} exists; use --overwrite to replace it")
         return load_orientation(path)
     return Orientation()
 
@@ -96,12 +102,17 @@ def orient() -> None:
     "--output",
     type=_out_file,
     default=None,
-    help="Orientation file to write (an existing one is updated).",
+    help="Orientation file to write.",
+)
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Update an existing output file: replace the part computed here.",
 )
 @run_guarded
-def orient_map(control, measurements, model, reject, map_id, output):
+def orient_map(control, measurements, model, reject, map_id, output, overwrite):
     """Orient the map from CONTROL (ID X Y Z) and tablet MEASUREMENTS (ID x_mm y_mm)."""
-    existing = _existing(output)  # a bad output path fails before any work
+    existing = _existing(output, overwrite)  # a bad output path fails before any work
     ctrl = read_control(control)
     ids, tablet = read_map_measurements(measurements)
     if not ids:
@@ -167,16 +178,21 @@ def orient_map(control, measurements, model, reject, map_id, output):
     "--output",
     type=_out_file,
     default=None,
-    help="Orientation file to write (an existing one is updated).",
+    help="Orientation file to write.",
+)
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Update an existing output file: replace the part computed here.",
 )
 @run_guarded
-def orient_photos(photofile, control, measurements, reject, output):
+def orient_photos(photofile, control, measurements, reject, output, overwrite):
     """Orient the photos of PHOTOFILE from parallaxes zeroed at control spots.
 
     MEASUREMENTS has lines 'POINT_ID PHOTO_ID px_mm py_mm'; only the
     parameters not entered with '=' in PHOTOFILE are solved for.
     """
-    existing = _existing(output)  # a bad output path fails before any work
+    existing = _existing(output, overwrite)  # a bad output path fails before any work
     entries = read_photo_file(photofile)
     ctrl = read_control(control)
     meas = read_photo_measurements(measurements)

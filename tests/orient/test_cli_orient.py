@@ -85,6 +85,9 @@ def test_orient_photos_and_merge(tmp_path):
     out = tmp_path / "o.json"
     assert _run("map", CONTROL, MAP, "-o", out).exit_code == 0
     r = _run("photos", PHOTOS, CONTROL, PMEAS, "-o", out)
+    assert r.exit_code == 1
+    assert f"{out} exists; use --overwrite to replace it" in r.output
+    r = _run("photos", PHOTOS, CONTROL, PMEAS, "-o", out, "--overwrite")
     assert r.exit_code == 0, r.output
     assert (
         "Photo 4711: 8 control spots, solved Xo, Yo, Zo, omega, phi, kappa; known sx, sy"
@@ -132,7 +135,7 @@ def test_orient_photos_errors(tmp_path):
     assert "ph.txt: line 2: the third field must be 'frame' or 'scanned'" in r.output
     out = tmp_path / "corrupt.json"
     out.write_text("{")
-    r = _run("map", CONTROL, MAP, "-o", out)
+    r = _run("map", CONTROL, MAP, "-o", out, "--overwrite")
     assert r.exit_code == 1
     assert "corrupt.json: line 1" in r.output
 
