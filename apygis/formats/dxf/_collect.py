@@ -234,3 +234,41 @@ def _own_text(xd: str, raw_text: str, what: str) -> tuple[int, str] | None:
         except ValueError:
             raise FormatError(f"{what}: bad text in {APPID} XDATA") from None
     return num, raw_text
+
+
+_MAX_ARC_POINTS = 100_000  # per arc segment: a bound against absurd radii
+
+
+def _flatten_bulges(xyb: np.ndarray, tol: float, closed: bool) -> np.ndarray:
+    """The vertices ``(x, y, bulge)`` of a 2-D polyline with its arc segments as chords.
+
+    A segment from vertex i to i+1 (and, closed, from the last to the
+    first) with bulge ``b`` is the arc of included angle ``4 atan(b)``
+    (counter-clockwise if positive); it is replaced by points on the arc
+    whose chords stay within ``tol`` of it (sagitta ``r (1 - cos(phi / 2))
+    <= tol``), computed on the true arc (not on a Bezier approximation).
+    The vertices are kept exactly. Returns ``(n, 2)`` points in the
+    polyline's own (object) coordinates; a closed polyline's first point is
+    not repeated at the end.
+    """
+    n = len(xyb)
+    out: list[np.ndarray] = []
+    for i in range(n if closed else n - 1):
+        p0, p1, b = xyb[i, :2], xyb[(i + 1) % n, :2], float(xyb[i, 2])
+        out.append(p0[None, :])
+        chord = p1 - p0
+        length = float(np.hypot(*chord))
+        if b == 0.0 or length == 0.0:
+            continue
+        theta = 4.0 * np.arctan(b)
+        r = length / (2.0 * abs(np.sin(theta / 2.0)))
+        left = np.array([-chord[1], chord[0]]) / length
+        centre = (p0 + p1) / 2.0 + left * (length / 2.0) / np.tan(theta / 2.0)
+        step = 2.0 * np.arccos(1.0 - tol / r) if tol < r else np.pi
+        k = min(_MAX_ARC_POINTS, max(1, int(np.ceil(abs(theta) / step))))
+        a0 = np.arctan2(p0[1] - centre[1], p0[0] - centre[0])
+        ang = a0 + theta * np.arange(1, k) / k
+        out.append(centre + r * np.column_stack([np.cos(ang), np.sin(ang)]))
+    if not closed:
+        out.append(xyb[-1:, :2])
+    return np.concatenate(out) if out else np.zeros((0, 2))

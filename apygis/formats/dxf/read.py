@@ -20,23 +20,63 @@ from apygis.model.polylines import to_csr
 from apygis.model.records import LINE_DTYPE, MAX_CODE, TEXT_LEN, next_numbers
 
 
-def _sniff(data: bytes, path) -> None:
-    """Raise FormatError unless ``data`` begins like a DXF file."""
+def _sniff(data: bytes, path) -> bytes:
+    """The file's bytes up to its first ``0`` / ``EOF``; FormatError unless it is DXF.
+
+    Content after the first ``0`` / ``EOF`` of an ASCII file (appended by a
+    tool, a concatenation, a bad transfer) is dropped with a warning naming
+    how many bytes and lines follow; whitespace, NUL and Ctrl-Z there are
+    dropped silently.
+    """
     if not data.strip():
         raise FormatError("empty file, not a DXF file", path=path)
     if data.startswith(_BINARY_SENTINEL):
         if not data.rstrip(b"\0").endswith(b"EOF"):
             raise FormatError("truncated: the binary DXF file does not end with EOF", path=path)
-        return
+        return data
     if not _looks_like_dxf(data[:4096]):
         raise FormatError(
             "not a DXF file: it does not begin with group code 0 and SECTION", path=path
         )
     # ezdxf's recovery accepts a file cut short and returns what it could
     # read; a DXF file ends with the tags 0 and EOF, so refuse one without.
-    tail = [ln.strip().upper() for ln in data[-256:].rstrip(b" \t\r\n\0\x1a").splitlines()]
-    if tail[-2:] != [b"0", b"EOF"]:
+    end = _first_eof(data)
+    if end is None:
         raise FormatError("truncated: the file does not end with the tags 0 and EOF", path=path)
+    rest = data[end:]
+    if rest.strip(b" \t\r\n\0\x1a"):
+        log.warning(
+            "%s: %d bytes (%d lines) after the tags 0 and EOF ignored",
+            path,
+            len(rest),
+            len(rest.splitlines()),
+        )
+    return data if end == len(data) else data[:end]
+
+
+_EOF_LINE = re.compile(rb"[ \t]*EOF[ \t]*\r?(?:\n|\Z)", re.IGNORECASE)
+
+
+def _first_eof(data: bytes) -> int | None:
+    """The offset just past the line ``EOF`` of the first ``0`` / ``EOF`` pair, or None.
+
+    A line ``EOF`` after a line ``0`` can only be that pair: group codes are
+    integers, so ``EOF`` is never a group code line after a value ``0``.
+    The search looks at each ``EOF`` (fast ``bytes.find``), not at every line.
+    """
+    for needle in (b"EOF", b"eof"):
+        k = data.find(needle)
+        while k >= 0:
+            start = data.rfind(b"\n", 0, k) + 1  # the start of the line of this EOF
+            m = _EOF_LINE.match(data, start)
+            if m and start > 0:
+                prev = data.rfind(b"\n", 0, start - 1) + 1  # the line before
+                if data[prev:start].strip() == b"0":
+                    return m.end()
+            k = data.find(needle, k + 3)
+    # any other case mix (Eof): rare, so one regular expression over the file
+    m = re.search(rb"(?:\A|\n)[ \t]*0[ \t]*\r?\n[ \t]*EOF[ \t]*\r?(?:\n|\Z)", data, re.I)
+    return m.end() if m else None
 
 
 def _looks_like_dxf(head: bytes) -> bool:
@@ -158,6 +198,7 @@ def read(
     tolerance_m: float = 0.005,
     topology: bool = True,
     sagitta_m: float = 0.01,
+    bulge_m: float | None = None,
     crs=None,
     fast: bool = True,
 ) -> MapFile:
@@ -188,6 +229,13 @@ def read(
     sagitta_m : float
         Largest distance of a chord from the curve when ARC, CIRCLE,
         ELLIPSE and SPLINE are flattened to line points.
+    bulge_m : float or None
+        Largest distance of a chord from the arc when the arc segments
+        (bulges) of a closed LWPOLYLINE or 2-D POLYLINE are flattened. None
+        (default): a quarter of 0.1 mm at the compilation scale 1:S,
+        ``0.1 mm x S / 4`` (S from the header record, 1000 for a DXF without
+        one: 0.025 m). Open polylines are still read through their vertices
+        only (logged).
     crs : optional
         The CRS of a DXF that apygis did not write (DXF has none), or one
         that overrides the header's.
@@ -217,10 +265,11 @@ def read(
     try:
         tolerance_m = float(tolerance_m)
         sagitta_m = float(sagitta_m)
+        bulge = None if bulge_m is None else float(bulge_m)
     except (TypeError, ValueError):
         raise DriverError("dxf tolerance_m and sagitta_m are numbers") from None
-    if not sagitta_m > 0 or not tolerance_m >= 0:
-        raise DriverError("dxf: sagitta_m must be > 0 and tolerance_m >= 0")
+    if not sagitta_m > 0 or not tolerance_m >= 0 or not (bulge is None or bulge > 0):
+        raise DriverError("dxf: sagitta_m and bulge_m must be > 0 and tolerance_m >= 0")
     names = _LayerNames(layer_map, default_ext)
     opts = {
         "symbol_code": int(symbol_code),
@@ -228,9 +277,9 @@ def read(
         "tolerance_m": tolerance_m,
         "topology": bool(topology),
         "sagitta_m": sagitta_m,
+        "bulge_m": bulge,
     }
-    data = read_bytes(path)
-    _sniff(data, path)
+    data = _sniff(read_bytes(path), path)
     stats: Counter = Counter()
     got = _fast_read(data, path, names, opts, stats) if fast else None
     if got is None:
@@ -283,7 +332,7 @@ def _report(path, stats: Counter) -> None:
         )
     if stats["bulges"]:
         log.info(
-            "%s: %d LWPOLYLINEs have arcs (bulges); read as their vertices only",
+            "%s: %d open polylines have arcs (bulges); read as their vertices only",
             path,
             stats["bulges"],
         )
