@@ -40,6 +40,13 @@ from apygis.model.map import Layer, MapFile, crs_string
 from apygis.model.polylines import export_lines
 from apygis.model.records import MAX_CODE
 
+# The file is UTF-8 (as every DXF from R2007 on), but ezdxf declares ANSI_1252.
+# GDAL's DXF driver ignores $ACADVER and decodes by $DWGCODEPAGE (ANSI_1252 as
+# Latin-1): ANSI_65001 (UTF-8) makes it read the texts as written; ezdxf and
+# AutoCAD read R2007+ files as UTF-8 whatever the code page. encode() swaps it.
+_CODEPAGE_EZDXF = "\n$DWGCODEPAGE\n  3\nANSI_1252\n"
+_CODEPAGE = "\n$DWGCODEPAGE\n  3\nANSI_65001\n"
+
 
 def _check_writable(layer: Layer, path) -> None:
     for name in ("symbols", "line_points", "texts"):
@@ -161,8 +168,8 @@ def _skeleton(
     doc.header["$MEASUREMENT"] = measurement
     doc.header["$PROJECTNAME"] = map_.id
     doc.appids.add(APPID)
-    for ext in map_.layers:
-        doc.layers.add(ext)
+    for name, colour in layer_colours(map_.layers).items():
+        doc.layers.add(name, color=colour)
     codes = sorted({int(c) for lay in map_.layers.values() for c in np.unique(lay.symbols["code"])})
     for code in codes:
         sym = library[code]
@@ -215,6 +222,50 @@ def _symbol_entities(layer: Layer, owner: int, start: int, text_m: float, cell_m
     return out, start + int(count.sum())
 
 
+def escape_text(text: str) -> str:
+    """A text as a DXF ``TEXT`` string that CAD programs and GIS show as written.
+
+    A caret starts a control character in DXF (``^J``, ``^I``): it is written
+    ``^ `` (caret, space), a literal caret for AutoCAD, ezdxf and GDAL. ``%%``
+    starts a control code (``%%d`` degree, ``%%c`` diameter, ``%%p`` plus-minus,
+    ``%%u`` underline, ...): in a text with ``%%``, every ``%`` is written
+    ``%%%``, AutoCAD's literal percent (which ezdxf follows; GDAL does not
+    know it, see ``docs/formats/dxf.md``). Other texts are written unchanged.
+
+    >>> escape_text("a^Jb"), escape_text("50%"), escape_text("50%%d")
+    ('a^ Jb', '50%', '50%%%%%%d')
+    """
+    if "^" in text:
+        text = text.replace("^", "^ ")
+    if "%%" in text:
+        text = text.replace("%", "%%%")
+    return text
+
+
+# Colours (AutoCAD Color Index) of the DXF layers: the plotter's default pens
+# where it has one for the layer (h blue, e brown; apygis.plot.plotdef), else the
+# palette in map order; see docs/formats/dxf.md.
+LAYER_COLOURS = {"h": 5, "e": 34}
+LAYER_PALETTE = (1, 3, 6, 30, 4, 8, 2, 200, 140, 40)
+
+
+def layer_colours(exts) -> dict[str, int]:
+    """The ACI colour of each map layer's DXF layer.
+
+    >>> layer_colours(["c", "e", "h", "r"])
+    {'c': 1, 'e': 34, 'h': 5, 'r': 3}
+    """
+    out = {}
+    k = 0
+    for ext in exts:
+        if ext in LAYER_COLOURS:
+            out[ext] = LAYER_COLOURS[ext]
+        else:
+            out[ext] = LAYER_PALETTE[k % len(LAYER_PALETTE)]
+            k += 1
+    return out
+
+
 def _text_entities(layer: Layer, owner: int, start: int, text_m: float):
     t = layer.texts
     out = []
@@ -228,9 +279,12 @@ def _text_entities(layer: Layer, owner: int, start: int, text_m: float):
             strict=True,
         )
     ):
-        # DXF readers decode "\U+XXXX" in strings: keep such texts exact in the XDATA
-        xd = f"T {num} {text.encode('utf-8').hex()}" if "\\" in text else f"T {num}"
-        out.append(_TEXT % (start + k, owner, layer.ext, x, y, z, text_m, text, xd))
+        # DXF readers decode "\U+XXXX" in strings, and the escaped text differs
+        # from the text: keep such texts exact in the XDATA
+        written = escape_text(text)
+        exact = "\\" in text or written != text
+        xd = f"T {num} {text.encode('utf-8').hex()}" if exact else f"T {num}"
+        out.append(_TEXT % (start + k, owner, layer.ext, x, y, z, text_m, written, xd))
     return out, start + len(t)
 
 
@@ -346,7 +400,9 @@ def encode(map_: MapFile, library=None, dxfversion: str = "R2010", path=None, pr
     doc.entitydb.handles.reset(f"{h:X}")  # the handles above are taken
     buf = io.StringIO()
     doc.write(buf)
-    skeleton = buf.getvalue()
+    skeleton = buf.getvalue().replace(_CODEPAGE_EZDXF, _CODEPAGE, 1)
+    if _CODEPAGE not in skeleton:  # pragma: no cover - ezdxf's layout
+        raise FormatError("ezdxf wrote no $DWGCODEPAGE ANSI_1252", path=path)
     sec = skeleton.find(_ENTITIES_START)
     end = skeleton.find(_ENTITIES_END, sec)
     if sec < 0 or end != sec + len(_ENTITIES_START):  # pragma: no cover - ezdxf's layout
