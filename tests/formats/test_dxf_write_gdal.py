@@ -103,3 +103,22 @@ def test_layers_have_colours(tmp_path):
     assert colours["h"] == LAYER_COLOURS["h"] == 5
     assert len(set(colours.values())) == 5
     assert 7 not in colours.values()
+
+
+def test_the_header_extent_is_the_records_extent(sample_map, tmp_path):
+    import ezdxf
+    import numpy as np
+
+    path = tmp_path / "s.dxf"
+    apygis.write(sample_map, path)
+    doc = ezdxf.readfile(path)
+    xyz = np.concatenate(
+        [
+            np.column_stack([t["x"], t["y"], t["z"]])
+            for lay in sample_map.layers.values()
+            for t in (lay.symbols, lay.line_points, lay.texts)
+            if len(t)
+        ]
+    )
+    assert tuple(doc.header["$EXTMIN"]) == tuple(xyz.min(axis=0))
+    assert tuple(doc.header["$EXTMAX"]) == tuple(xyz.max(axis=0))

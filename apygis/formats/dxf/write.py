@@ -222,6 +222,32 @@ def _symbol_entities(layer: Layer, owner: int, start: int, text_m: float, cell_m
     return out, start + int(count.sum())
 
 
+def _set_extents(doc, map_: MapFile) -> None:
+    """``$EXTMIN`` / ``$EXTMAX``: the 3-D extent of every record's position.
+
+    ezdxf writes the header's extents from the model space's, so they are set
+    there. The drawn symbol cells and labels reach a little beyond the points
+    (a few paper millimetres at the map's scale); CAD programs use the extent
+    for zooming to the drawing, for which the records' extent is what counts.
+    Without records, the header keeps ezdxf's empty extent.
+    """
+    cols = [
+        np.column_stack([t["x"], t["y"], t["z"]])
+        for lay in map_.layers.values()
+        for t in (lay.symbols, lay.line_points, lay.texts)
+        if len(t)
+    ]
+    if not cols:
+        return
+    xyz = np.concatenate(cols)
+    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    msp = doc.modelspace()
+    msp.dxf.extmin = tuple(float(v) for v in lo)
+    msp.dxf.extmax = tuple(float(v) for v in hi)
+    doc.header["$EXTMIN"] = msp.dxf.extmin
+    doc.header["$EXTMAX"] = msp.dxf.extmax
+
+
 def escape_text(text: str) -> str:
     """A text as a DXF ``TEXT`` string that CAD programs and GIS show as written.
 
@@ -396,6 +422,7 @@ def encode(map_: MapFile, library=None, dxfversion: str = "R2010", path=None, pr
             progress(k + 1, n + 1)
     entities = "".join(parts).encode("utf-8")
     del parts
+    _set_extents(doc, map_)
     doc.rootdict[APPID]["HEADER"].reset(_header_tags(map_, entities))
     doc.entitydb.handles.reset(f"{h:X}")  # the handles above are taken
     buf = io.StringIO()
