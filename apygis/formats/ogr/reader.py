@@ -31,7 +31,7 @@ from apygis.formats.ogr._common import (
     log,
 )
 from apygis.formats.ogr.schema import SCHEMA_VERSION, _Format, _member_files, _parse_name
-from apygis.formats.ogr.wkb import _check_finite, _from_wkb, _point_coords
+from apygis.formats.ogr.wkb import _from_wkb, _point_coords
 from apygis.model.map import Layer, check_ext
 from apygis.model.polylines import to_csr
 from apygis.model.records import LINE_DTYPE, REF_FIELDS, SYMBOL_DTYPE, TEXT_DTYPE, next_numbers
@@ -317,9 +317,10 @@ def _foreign_layer(wkb, columns: dict, src: _Source, acc: _Foreign, opts: dict) 
 
 
 def _coords3(xyz: np.ndarray, src: _Source) -> np.ndarray:
+    """Coordinates of geometries from :func:`_from_wkb` (which checked every one), with
+    the NaN z of 2-D geometries as 0."""
     xyz = np.array(xyz, dtype=float).reshape(-1, 3)
     xyz[:, 2] = np.where(np.isnan(xyz[:, 2]), 0.0, xyz[:, 2])
-    _check_finite(xyz, src.dataset, src.name)
     return xyz
 
 

@@ -99,8 +99,7 @@ def _point_coords_slow(wkb: np.ndarray, path, layer: str) -> np.ndarray:
             _rec(layer),
         )
     xyz = shapely.get_coordinates(geoms, include_z=True)
-    xyz[:, 2] = np.where(np.isnan(xyz[:, 2]), 0.0, xyz[:, 2])
-    _check_finite(xyz, path, layer)
+    xyz[:, 2] = np.where(np.isnan(xyz[:, 2]), 0.0, xyz[:, 2])  # _from_wkb checked them
     return xyz
 
 
