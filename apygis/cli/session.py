@@ -241,14 +241,14 @@ def session(
 
 
 def _open_tablet(url):
-    import serial
-
     from apygis.errors import InstrumentError
+    from apygis.instrument.ports import open_url
 
-    try:
-        return serial.serial_for_url(url, timeout=0.002)
-    except (serial.SerialException, OSError, ValueError) as exc:
-        raise InstrumentError(f"cannot open the tablet port {url}: {exc}") from exc
+    return open_url(
+        url,
+        lambda exc: InstrumentError(f"cannot open the tablet port {url}: {exc}"),
+        timeout=0.002,
+    )
 
 
 def _open_motors(motors):
