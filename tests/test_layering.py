@@ -29,8 +29,10 @@ ALLOWED: dict[str, set[str]] = {
     "formats": FLOOR | {"model"},
     "compile": FLOOR | {"model", "orient"},
     "plot": FLOOR | {"model", "formats"},
+    "aerotri": FLOOR | {"orient"},  # aerotriangulation: blocks, imagery, matching, synthetic blocks
     "session": FLOOR | {"model", "orient", "compile", "instrument", "formats"},
-    "cli": FLOOR | {"model", "orient", "compile", "instrument", "formats", "plot", "session"},
+    "cli": FLOOR
+    | {"model", "orient", "compile", "instrument", "formats", "plot", "session", "aerotri"},
     "__init__": FLOOR,  # the public names are imported lazily, by name (PEP 562)
     "__main__": {"cli"},
 }
