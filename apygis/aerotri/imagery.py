@@ -84,7 +84,7 @@ class ArraySource:
         if a.ndim == 3:  # colour: luminance (ITU-R BT.601)
             a = a[..., 0] * 0.299 + a[..., 1] * 0.587 + a[..., 2] * 0.114
         self._levels = [np.asarray(a, dtype=np.float32)]
-        for _ in range(number_of_levels(*a.shape[:2], smallest) - 1):
+        for _ in range(number_of_levels(a.shape[0], a.shape[1], smallest) - 1):
             self._levels.append(reduce2(self._levels[-1]))
 
     @property
