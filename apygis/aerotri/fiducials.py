@@ -24,8 +24,8 @@ import numpy as np
 from apygis.aerotri.camera import Camera, PixelTransform
 
 __all__ = [
-    "DARK_DN",
     "BRIGHT_DN",
+    "DARK_DN",
     "FIDUCIAL_SHAPES",
     "ORIENTATION_SHAPES",
     "draw_marks",
@@ -63,10 +63,8 @@ def _boundary_distance(u: np.ndarray, v: np.ndarray, shapes) -> np.ndarray:
     r = np.hypot(u, v)
     d = np.full(u.shape, np.inf)
     for kind, a, _ in shapes:
-        if kind == "square":
-            s = np.abs(np.maximum(np.abs(u) - a, np.abs(v) - a))
-        else:
-            s = np.abs(r - a)
+        sq = kind == "square"
+        s = np.abs(np.maximum(np.abs(u) - a, np.abs(v) - a)) if sq else np.abs(r - a)
         np.minimum(d, s, out=d)
     return d
 
