@@ -105,8 +105,8 @@ def _paint(
     idx = np.flatnonzero(edge)
     k = subsamples
     offs = (np.arange(k) + 0.5) / k - 0.5
-    ou, ov = np.meshgrid(offs, offs)
-    ou, ov = ou.ravel(), ov.ravel()
+    ou = np.tile(offs, k)  # subsample column offsets, row-major k x k
+    ov = np.repeat(offs, k)
     chunk = max(1, 2_000_000 // (k * k))
     for s in range(0, len(idx), chunk):
         ii = idx[s : s + chunk]
