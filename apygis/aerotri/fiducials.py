@@ -19,6 +19,8 @@ the scan's :class:`PixelTransform`; the background shows where no shape covers.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from apygis.aerotri.camera import Camera, PixelTransform
@@ -28,7 +30,12 @@ __all__ = [
     "DARK_DN",
     "FIDUCIAL_SHAPES",
     "ORIENTATION_SHAPES",
+    "MarkFit",
     "draw_marks",
+    "find_candidates",
+    "mark_template",
+    "ncc_map",
+    "refine_mark",
     "render_design",
 ]
 
@@ -169,3 +176,231 @@ def render_design(
     shapes = ORIENTATION_SHAPES if orientation else FIDUCIAL_SHAPES
     _paint(img, transform, centre_mm, shapes, subsamples)
     return img
+
+
+# --------------------------------------------------------------------------- detection
+
+#: half width (mm) of the coarse-search templates: inside the dark squares, so the
+#: template never sees the image around a mark
+_TEMPLATE_HALF_MM = {False: 3.5, True: 1.75}
+#: radius (mm) of the level-0 refinement window: inside the dark square (4 mm),
+#: outside the ring (1.3 mm)
+_REFINE_RADIUS_MM = 1.6
+
+
+def mark_template(pixel_mm: float, *, orientation: bool = False) -> np.ndarray:
+    """The inner part of a mark (fiducial or orientation mark) at ``pixel_mm`` per pixel.
+
+    A square of side ``2 * 3.5`` mm (fiducial) or ``2 * 1.75`` mm (orientation mark),
+    odd size, centred on the mark: only the dark square, disk and ring, no surround.
+    """
+    half = _TEMPLATE_HALF_MM[orientation]
+    n = 2 * max(2, int(np.ceil(half / pixel_mm))) + 1
+    p = float(pixel_mm)
+    t = PixelTransform.affine(p, 0.0, 0.0, -p, -(n - 1) / 2 * p, (n - 1) / 2 * p)
+    return render_design(t, (n, n), orientation=orientation, subsamples=4)
+
+
+def ncc_map(image: np.ndarray, template: np.ndarray, *, min_std: float = 4.0) -> np.ndarray:
+    """Normalised cross-correlation of ``template`` centred at every pixel of ``image``.
+
+    ``rho(c, r) = sum (g - mean g)(t - mean t) / sqrt(sum (g - mean g)^2 sum (t - mean t)^2)``
+    over the template's footprint centred at ``(c, r)`` (odd template; the image is
+    reflected at its border). Where the image's standard deviation under the
+    footprint is below ``min_std`` DN (flat areas, a blank scan) ``rho = 0``.
+    """
+    import cv2
+
+    th, tw = template.shape
+    ry, rx = th // 2, tw // 2
+    img = np.asarray(image, dtype=np.float32)
+    pad = cv2.copyMakeBorder(img, ry, ry, rx, rx, cv2.BORDER_REFLECT_101)
+    tpl = np.asarray(template, dtype=np.float32)
+    rho = cv2.matchTemplate(pad, tpl, cv2.TM_CCOEFF_NORMED)
+    mean = cv2.boxFilter(pad, cv2.CV_64F, (tw, th), normalize=True, borderType=cv2.BORDER_ISOLATED)
+    sq = cv2.boxFilter(
+        pad.astype(np.float64) ** 2, cv2.CV_64F, (tw, th), normalize=True,
+        borderType=cv2.BORDER_ISOLATED,
+    )  # fmt: skip
+    var = (sq - mean**2)[ry : ry + img.shape[0], rx : rx + img.shape[1]]
+    rho = np.where((var >= min_std**2) & np.isfinite(rho), rho, 0.0)
+    return np.asarray(rho, dtype=np.float64)
+
+
+def find_candidates(
+    image: np.ndarray,
+    pixel_mm: float,
+    *,
+    orientation: bool = False,
+    threshold: float = 0.5,
+    max_candidates: int = 40,
+    separation_mm: float = 5.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Candidate marks in a (coarse) image: positions ``(n, 2)`` (col, row) and NCC scores.
+
+    The local maxima of :func:`ncc_map` with the mark's template at ``pixel_mm``
+    (the design is invariant to rotations by 90 degrees and mirrors, and nearly
+    so to the scan's small rotation) above ``threshold``, at least
+    ``separation_mm`` apart, best first; positions to sub-pixel by a parabola
+    through the maximum and its neighbours in each axis.
+    """
+    from scipy import ndimage
+
+    rho = ncc_map(image, mark_template(pixel_mm, orientation=orientation))
+    size = max(3, 2 * int(separation_mm / pixel_mm / 2) + 1)
+    peak = (rho == ndimage.maximum_filter(rho, size=size, mode="nearest")) & (rho >= threshold)
+    rows, cols = np.nonzero(peak)
+    order = np.argsort(-rho[rows, cols], kind="stable")[:max_candidates]
+    rows, cols = rows[order], cols[order]
+    score = rho[rows, cols]
+    h, w = rho.shape
+    rc, cc = np.clip(rows, 1, h - 2), np.clip(cols, 1, w - 2)
+
+    def vertex(m, z, p):
+        den = m - 2 * z + p
+        return np.where(den < 0, 0.5 * (m - p) / np.where(den < 0, den, -1.0), 0.0)
+
+    dc = vertex(rho[rc, cc - 1], rho[rc, cc], rho[rc, cc + 1])
+    dr = vertex(rho[rc - 1, cc], rho[rc, cc], rho[rc + 1, cc])
+    xy = np.column_stack([cols + np.clip(dc, -0.5, 0.5), rows + np.clip(dr, -0.5, 0.5)])
+    return xy.astype(float), score.astype(float)
+
+
+def _ramp(r: np.ndarray, radius: float, width: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Coverage of the disk ``r <= radius`` smoothed over ``width`` and its r-derivative."""
+    t = (radius - r) / width + 0.5
+    inside = (t > 0.0) & (t < 1.0)
+    return np.clip(t, 0.0, 1.0), np.where(inside, -1.0 / width, 0.0)
+
+
+@dataclass(frozen=True)
+class MarkFit:
+    """A mark refined at full resolution (see :func:`refine_mark`).
+
+    ``xy``: centre (col, row), level-0 pixels; ``sigma_px``: its standard
+    deviations from the fit; ``background`` and ``contrast``: the fitted dark
+    level and bright-minus-dark (DN); ``r2``: the share of the window's variance
+    the model explains (1 for a perfect mark); ``ok``: converged with
+    ``r2 >= 0.8`` and a contrast of at least 20 DN.
+    """
+
+    xy: tuple[float, float]
+    sigma_px: tuple[float, float]
+    background: float
+    contrast: float
+    r2: float
+    ok: bool
+
+
+def refine_mark(
+    source,
+    xy0,
+    local_mm: np.ndarray,
+    *,
+    search_mm: float = 1.0,
+    iterations: int = 10,
+) -> MarkFit:
+    """The centre of the fiducial mark near ``xy0`` (level-0 pixels), to sub-pixel.
+
+    Reads one level-0 window of ``source`` (an :class:`ImageSource`) of radius
+    ``1.6 mm + search_mm`` around ``xy0``. ``local_mm`` is the 2 x 2 linear part
+    of the pixel -> mm transform near the mark (from the coarse orientation); the
+    local radius of a pixel ``x`` from a centre ``c`` is ``r = |local_mm (x - c)|``.
+
+    1. Start: iterated centroid of ``max(g - median, 0)`` over ``r <= 1.6`` mm (the
+       median of that disk is the dark level: the bright disk and ring cover 20 %).
+    2. Least-squares fit (Gauss-Newton) of the radial model over ``r <= 1.6`` mm::
+
+           g(x) = a + b (R(r, 0.3) + R(r, 1.3) - R(r, 1.0)),
+           R(r, rho) = clip((rho - r) / w + 1/2, 0, 1),
+
+       the disk and ring with edges smoothed over the pixel's width ``w`` across
+       the edge (``w = |local_mm| (|cos phi| + |sin phi|)`` in mm, ``phi`` the
+       direction from the centre): unknowns ``c = (col, row)``, ``a``, ``b``. The
+       model's small errors (the exact edge profile) are point-symmetric about the
+       centre, so they do not bias ``c``.
+    """
+    xy0 = np.asarray(xy0, dtype=float).reshape(2)
+    lm = np.asarray(local_mm, dtype=float).reshape(2, 2)
+    pix_mm = float(np.sqrt(abs(np.linalg.det(lm))))
+    half = int(np.ceil((_REFINE_RADIUS_MM + search_mm) / pix_mm)) + 2
+    c0, r0 = int(np.rint(xy0[0])) - half, int(np.rint(xy0[1])) - half
+    win = np.asarray(source.read(0, c0, r0, 2 * half + 1, 2 * half + 1), dtype=float)
+    rows, cols = np.mgrid[r0 : r0 + 2 * half + 1, c0 : c0 + 2 * half + 1]
+    pts = np.column_stack([cols.ravel(), rows.ravel()]).astype(float)
+    g = win.ravel()
+    fail = MarkFit((float(xy0[0]), float(xy0[1])), (np.inf, np.inf), 0.0, 0.0, 0.0, False)
+
+    def radius(c):
+        d = pts - c
+        m = d @ lm.T
+        return d, m, np.hypot(m[:, 0], m[:, 1])
+
+    # 1. iterated centroid
+    c = xy0.copy()
+    for _ in range(6):
+        _, _, r = radius(c)
+        sel = r <= _REFINE_RADIUS_MM
+        if sel.sum() < 9:
+            return fail
+        wgt = np.maximum(g[sel] - np.median(g[sel]), 0.0)
+        if wgt.sum() <= 0:
+            return fail
+        new = (pts[sel] * wgt[:, None]).sum(axis=0) / wgt.sum()
+        step = float(np.hypot(*(new - c)))
+        c = new
+        if step < 0.05:
+            break
+    if float(np.hypot(*(c - xy0))) * pix_mm > search_mm + 0.5:
+        return fail
+    # 2. Gauss-Newton on the radial model
+    ata = lm.T @ lm
+    sigma = np.array([np.inf, np.inf])
+    a = b = r2 = 0.0
+    converged = False
+    for _ in range(iterations):
+        d, m, r = radius(c)
+        sel = r <= _REFINE_RADIUS_MM
+        d, r, gs = d[sel], r[sel], g[sel]
+        phi_c = np.abs(m[sel, 0]) + np.abs(m[sel, 1])
+        wdt = pix_mm * np.where(r > 0, phi_c / np.where(r > 0, r, 1.0), 1.0)
+        f1, d1 = _ramp(r, 0.3, wdt)
+        f2, d2 = _ramp(r, 1.3, wdt)
+        f3, d3 = _ramp(r, 1.0, wdt)
+        prof, dprof = f1 + f2 - f3, d1 + d2 - d3
+        design = np.column_stack([np.ones_like(prof), prof])
+        (a, b), *_ = np.linalg.lstsq(design, gs, rcond=None)
+        # dr/dc = -(A^T A (x - c)) / r
+        rs = np.where(r > 0, r, 1.0)
+        drdc = -(d @ ata) / rs[:, None]
+        jac = np.column_stack([b * dprof[:, None] * drdc, design])
+        res = gs - (a + b * prof)
+        n = jac.T @ jac
+        try:
+            dx = np.linalg.solve(n, jac.T @ res)
+        except np.linalg.LinAlgError:
+            return fail
+        c = c + dx[:2]
+        dof = max(len(res) - 4, 1)
+        s0 = float(res @ res) / dof
+        cov = s0 * np.linalg.pinv(n)
+        sigma = np.sqrt(np.abs(np.diag(cov)[:2]))
+        sst = float(((gs - gs.mean()) ** 2).sum())
+        r2 = 1.0 - float(res @ res) / sst if sst > 0 else 0.0
+        if float(np.hypot(dx[0], dx[1])) < 1e-4:
+            converged = True
+            break
+    ok = bool(
+        converged
+        and r2 >= 0.8
+        and b >= 20.0
+        and float(np.hypot(*(c - xy0))) * pix_mm <= search_mm + 0.5
+    )
+    return MarkFit(
+        (float(c[0]), float(c[1])),
+        (float(sigma[0]), float(sigma[1])),
+        float(a),
+        float(b),
+        float(r2),
+        ok,
+    )
