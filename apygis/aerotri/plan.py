@@ -666,8 +666,11 @@ def gruber_regions(plan: BlockPlan, pair: Pair | tuple[int, int]) -> list[Polygo
 
     Model area ``M = F_a & F_b`` (footprints). With ``u`` the unit vector of
     the base (nadir of ``a`` to nadir of ``b``; for vertical photos the nadir
-    is the projection centre's ``(X, Y)``) and ``v`` the unit vector 90
-    degrees counter-clockwise from it, ``M`` spans ``[v0, v1]`` across the base,
+    is the projection centre's ``(X, Y)``), turned to the nearer side of the
+    smallest rectangle around ``M`` (so that the squares are aligned with the
+    frame edges also for diagonal pairs between strips; for a pair along a
+    strip this changes nothing), and ``v`` the unit vector 90 degrees
+    counter-clockwise from it, ``M`` spans ``[v0, v1]`` across the base,
     width ``W = v1 - v0``. The regions are squares (sides parallel to ``u`` and
     ``v``) of side ``s = min(W / 4, |u_b - u_a|)`` (the two columns never
     overlap), centred at
@@ -698,6 +701,14 @@ def gruber_regions(plan: BlockPlan, pair: Pair | tuple[int, int]) -> list[Polygo
         h = math.radians(plan.headings[a])
         base = np.array([math.sin(h), math.cos(h)])
     u = base / np.hypot(*base)
+    # snap u to the nearer side direction of the model's minimum rotated rectangle
+    rect = np.asarray(model.minimum_rotated_rectangle.exterior.coords)
+    sides = np.diff(rect[:3], axis=0)
+    norms = np.hypot(sides[:, 0], sides[:, 1])
+    if np.all(norms > 0):
+        sides = sides / norms[:, None]
+        k = int(np.argmax(np.abs(sides @ u)))
+        u = sides[k] * np.sign(sides[k] @ u)
     v = np.array([-u[1], u[0]])
     pts = np.asarray(model.exterior.coords)
     pu, pv = pts @ u, pts @ v
