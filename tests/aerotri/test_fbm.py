@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from apygis.aerotri import fbm
 from apygis.aerotri.camera import PixelTransform
 from apygis.aerotri.fbm import PairMatches, homography_from_orientations, match_pair
 from apygis.aerotri.interest import foerstner
@@ -212,6 +213,31 @@ def test_ambiguous_band_is_rejected(scene):
     assert rate_band < 0.2 * rate_rest
     err = np.linalg.norm(true_b("A", "B", m.xy_a) - m.xy_b, axis=1)
     assert np.all(err[in_band] < 1.5)
+
+
+@pytest.mark.parametrize("model", ["strip", "cross"])
+def test_robust_models_reject_random_outliers(scene, model):
+    """10 % random pairs added to the matches: the robust models remove them.
+
+    A random pair passes the relative orientation only when b's point falls within
+    3 sigma (~0.7 px) of the epipolar line of a's point: probability ~ 1.4 / 768 per
+    pair, so among ~120 outliers at most a few pass (the bound 3 allows for that).
+    A homography passes a random pair only within 3 sigma of H p_a: ~0 of them.
+    """
+    b = "B" if model == "strip" else "C"
+    m = run(scene, "A", b, kind=model)
+    rng = np.random.default_rng(11)
+    n_out = len(m.xy_a) // 10
+    xa = np.vstack([m.xy_a, rng.uniform(0, SIZE - 1, (n_out, 2))])
+    xb = np.vstack([m.xy_b, rng.uniform(0, SIZE - 1, (n_out, 2))])
+    if model == "strip":
+        out = fbm._strip_model(xa, xb, VIEWS["A"][1].to_mm, VIEWS[b][1].to_mm, C_MM, 1.5)
+    else:
+        out = fbm._homography_model(xa, xb, 1.5, (SIZE, SIZE))
+    assert out is not None
+    inl = out[0]
+    assert np.count_nonzero(inl[-n_out:]) <= 3
+    assert np.count_nonzero(inl[:-n_out]) >= 0.95 * len(m.xy_a)
 
 
 def test_cross_strip_pair(scene):
