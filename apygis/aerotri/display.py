@@ -8,7 +8,8 @@ What is drawn (ground coordinates, metres, equal aspect; see
 :mod:`apygis.aerotri.plan`):
 
 * each footprint as an outline, one colour per strip, cross strips dashed;
-  the image number at the footprint's centre;
+  the image number at the footprint's centre (in blocks of more than 300
+  images only at the strip ends);
 * the projection centres (dots) joined by the strip line, with an arrow in
   the flight direction at the strip's last image and the strip number at its
   first;
@@ -146,7 +147,11 @@ def block_display(
     h_in = w_in * aspect
     if h_in > 10.0:
         w_in, h_in = w_in * 10.0 / h_in, 10.0
-    fig = Figure(figsize=(w_in + 3.2, h_in + 1.4), layout="constrained")
+    # fixed margins (inches): the axes get exactly the block's aspect
+    left, right, bottom, top = 1.25, 2.9, 0.75, 0.5
+    fw, fh = w_in + left + right, h_in + bottom + top
+    fig = Figure(figsize=(fw, fh))
+    fig.subplots_adjust(left / fw, bottom / fh, 1 - right / fw, 1 - top / fh)
     (FigureCanvasPdf if fmt == "pdf" else FigureCanvasAgg)(fig)
     ax = fig.add_subplot()
     ax.set_aspect("equal")
@@ -164,19 +169,23 @@ def block_display(
     )
 
     n_img = len(plan.images)
-    label_size = float(np.clip(900 / max(n_img, 1) ** 0.5 / 10, 4.0, 9.0))
+    label_size = float(np.clip(90 / max(n_img, 1) ** 0.5, 5.0, 9.0))
     colours = [
         "#1f77b4", "#9467bd", "#17becf", "#8c564b", "#e377c2",
         "#7f7f7f", "#bcbd22", "#393b79", "#637939", "#843c39",
     ]  # fmt: skip
     handles: list = []
+    dense = n_img > 300
+    fp_lw = 0.4 if dense else 0.8
+    many_strips = len(plan.strips) > 12  # legend: one entry per kind instead of per strip
+    seen_kinds: set[str] = set()
     for k, (s, st) in enumerate(sorted(plan.strips.items())):
         col = colours[k % len(colours)]
         ls: Literal["--", "-"] = "--" if st.kind == "cross" else "-"
         polys = [np.asarray(plan.footprints[i].exterior.coords)[:, :2] for i in st.images]
         ax.add_collection(
             PolyCollection(
-                polys, facecolors="none", edgecolors=col, linestyles=ls, linewidths=0.8, zorder=2
+                polys, facecolors="none", edgecolors=col, linestyles=ls, linewidths=fp_lw, zorder=2
             )
         )
         xy = np.array([(plan.images[i].X, plan.images[i].Y) for i in st.images])
@@ -205,20 +214,26 @@ def block_display(
             color=col,
             zorder=6,
         )
-        handles.append(
-            Line2D([], [], color=col, linestyle=ls, label=f"strip {s} ({st.kind})", linewidth=1.2)
+        if not many_strips or st.kind not in seen_kinds:
+            seen_kinds.add(st.kind)
+            text = f"{st.kind} strips" if many_strips else f"strip {s} ({st.kind})"
+            handles.append(Line2D([], [], color=col, linestyle=ls, label=text, linewidth=1.2))
+    # image numbers: all of them, or in dense blocks those at the strip ends
+    if dense:
+        labelled = sorted({i for st in plan.strips.values() for i in (st.images[0], st.images[-1])})
+    else:
+        labelled = sorted(plan.images)
+    for i in labelled:
+        im = plan.images[i]
+        ax.annotate(
+            str(i),
+            (im.X, im.Y),
+            xytext=(3, 3),
+            textcoords="offset points",
+            fontsize=label_size,
+            color="0.15",
+            zorder=6,
         )
-    if n_img <= 2000:
-        for i, im in plan.images.items():
-            ax.annotate(
-                str(i),
-                (im.X, im.Y),
-                xytext=(3, 3),
-                textcoords="offset points",
-                fontsize=label_size,
-                color="0.15",
-                zorder=6,
-            )
 
     if tie_points_xy is not None:
         tp = np.asarray(tie_points_xy, dtype=float).reshape(-1, 2)
@@ -283,7 +298,13 @@ def block_display(
         for k, (_, col, text) in enumerate(COUNT_CLASSES):
             if segs[k]:
                 ax.add_collection(
-                    LineCollection(segs[k], colors=col, linewidths=2.0, alpha=0.75, zorder=4.5)
+                    LineCollection(
+                        segs[k],
+                        colors=col,
+                        linewidths=2.0 if len(points_per_pair) <= 200 else 0.7,
+                        alpha=0.75,
+                        zorder=4.5 + 0.1 * (len(COUNT_CLASSES) - k),  # problems on top
+                    )
                 )
                 handles.append(Line2D([], [], color=col, linewidth=2.0, label=f"model: {text}"))
 
@@ -330,7 +351,7 @@ def block_display(
     ax.legend(
         handles=handles,
         loc="upper left",
-        bbox_to_anchor=(1.01, 1.0),
+        bbox_to_anchor=(1.02, 1.0),
         fontsize=8,
         frameon=False,
         borderaxespad=0.0,
