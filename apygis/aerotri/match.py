@@ -1,0 +1,660 @@
+"""Fully automatic tie points (``apygis at match``): the seed's block formation and point tracking.
+
+The pipeline, stage by stage; every stage is a set of independent tasks
+(:class:`~apygis.aerotri.runner.Runner`: local processes, a Dask cluster, or
+this process), and each task's result is committed to the block as it
+arrives, so an interrupted run continues where it stopped:
+
+1. **pyramids** (per image): luminance, tiled, overviews by factors of 2
+   (:mod:`apygis.aerotri.pyramid`).
+2. **interior orientation** (per image): fiducials of scanned film
+   (:mod:`apygis.aerotri.interior`), or the fixed transform of a digital camera.
+3. **interest points** (per image) at the intermediate level ``L`` (the first
+   level whose long side is at most ``intermediate_px``): Förstner points
+   spread over the image (:mod:`apygis.aerotri.interest`).
+4. **block formation** (per planned pair): area-based matching of the
+   Förstner points in search areas predicted from the approximate
+   orientations (vertical photos at the plan's centres and headings over the
+   mean terrain), outliers removed by a robust relative orientation (pairs in a
+   strip) or a robust homography (cross-strip pairs) (:mod:`apygis.aerotri.fbm`);
+   then manifold points by linking the same Förstner point across models
+   (:mod:`apygis.aerotri.tracks`). Two-fold points are kept selectively (at
+   most ``max_twofold_per_pair`` per pair, spread over the model); points seen
+   in three or more images all.
+5. **point tracking** (per pair of reference and search image): each point's
+   reference image is the one where it lies closest to the centre; there the
+   Förstner operator is applied again at full resolution, in the window that
+   the level-``L`` point covers, and the strongest point becomes the
+   reference point. It is then measured in every other image of the point by
+   least-squares matching (6 affine + 2 radiometric parameters, cubic-spline
+   resampling) from level ``L`` down to full resolution
+   (:func:`apygis.aerotri.lsm.track`), starting from the block-formation
+   positions and the local affine map of the pair's homography. A measurement
+   is kept when it converged, its correlation is at least ``corr_min`` and it
+   stayed within ``2**L`` full-resolution pixels of the block-formation
+   position (a jump to another feature is a gross error); a point keeps at
+   least two images or is dropped.
+6. **names, observations and gaps**: tie point names from the block's start
+   value and interval (never issued twice); every observation in pixels and
+   photo millimetres (through the image's interior orientation; not corrected
+   for distortion) with its precision (the LSM's standard deviation, pixels;
+   the reference observation gets the median of its partners', as the
+   reference point's own definition has no error of its own); von Gruber gap
+   counts per model (:func:`apygis.aerotri.plan.gap_report`).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from apygis.aerotri import plan as planning
+from apygis.aerotri.block import Block, BlockError
+from apygis.aerotri.camera import Camera, PixelTransform
+from apygis.aerotri.imagery import full_to_level, level_to_full
+from apygis.aerotri.interest import InterestPoints, foerstner
+from apygis.aerotri.project import block_plan, terrain_height
+from apygis.aerotri.pyramid import PyramidSource, build_pyramid
+from apygis.aerotri.runner import Runner
+from apygis.errors import OrientationError
+from apygis.orient.collinearity import ExteriorOrientation
+
+__all__ = ["MatchOptions", "MatchReport", "match_block"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class MatchOptions:
+    """Options of :func:`match_block` (defaults suit 60-80 % / 20-60 % overlap blocks)."""
+
+    intermediate_px: int = 1100
+    points_per_image: int = 5000
+    search_px: float = 30.0
+    ncc_min: float = 0.7
+    half: int = 7
+    corr_min: float = 0.8
+    max_twofold_per_pair: int = 400
+    scheduler: str | None = None
+    workers: int | None = None
+
+
+@dataclass
+class MatchReport:
+    """What :func:`match_block` did."""
+
+    level: int
+    images: int
+    pairs: int
+    pairs_failed: list[tuple[int, int, str]]
+    points: int
+    observations: int
+    multiplicity: dict[int, int]
+    rejected: dict[str, int] = field(default_factory=dict)
+    flagged_interior: list[int] = field(default_factory=list)
+    gaps: dict[tuple[int, int], list[int]] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+# --- tasks (module level: they run in worker processes) ---------------------------------
+
+
+def _task_pyramid(image: str, pyramid: str) -> str:
+    return str(build_pyramid(image, pyramid))
+
+
+def _task_interior(pyramid: str, camera: dict, image: int) -> dict:
+    from apygis.aerotri.interior import interior_orientation
+
+    src = PyramidSource(pyramid)
+    try:
+        res = interior_orientation(src, Camera.from_dict(camera), name=str(image))
+    finally:
+        src.close()
+    return res.to_dict()
+
+
+def _task_features(pyramid: str, level: int, n: int) -> np.ndarray:
+    src = PyramidSource(pyramid)
+    try:
+        h, w = src.shape(level)
+        img = src.read(level, 0, 0, w, h)
+    finally:
+        src.close()
+    grid = max(1, round(math.sqrt(n / 60)))
+    pts = foerstner(img, max_points=n, grid=grid)
+    return pts.xy.astype(np.float32)
+
+
+def _task_pair(
+    pyr_a: str,
+    pyr_b: str,
+    level: int,
+    xy_a: np.ndarray,
+    xy_b: np.ndarray,
+    predict: np.ndarray | None,
+    kind: str,
+    t_a: list[float],
+    t_b: list[float],
+    focal_mm: float,
+    options: MatchOptions,
+) -> dict:
+    from apygis.aerotri.fbm import match_pair
+
+    sa, sb = PyramidSource(pyr_a), PyramidSource(pyr_b)
+    try:
+        ha, wa = sa.shape(level)
+        hb, wb = sb.shape(level)
+        img_a, img_b = sa.read(level, 0, 0, wa, ha), sb.read(level, 0, 0, wb, hb)
+    finally:
+        sa.close()
+        sb.close()
+    Ta = _level_transform(PixelTransform.from_list(t_a), level)
+    Tb = _level_transform(PixelTransform.from_list(t_b), level)
+    one_a, one_b = np.ones(len(xy_a)), np.ones(len(xy_b))
+    m = match_pair(
+        img_a,
+        img_b,
+        InterestPoints(np.asarray(xy_a, float), one_a, one_a),
+        InterestPoints(np.asarray(xy_b, float), one_b, one_b),
+        predict=predict,
+        search_px=options.search_px,
+        kind=kind,
+        photo_a=Ta.to_mm,
+        photo_b=Tb.to_mm,
+        focal_mm=focal_mm,
+        ncc_min=options.ncc_min,
+    )
+    return {
+        "idx_a": np.asarray(m.idx_a, int),
+        "idx_b": np.asarray(m.idx_b, int),
+        "ncc": np.asarray(m.ncc, float),
+        "sigma_px": float(m.sigma_px) if np.isfinite(m.sigma_px) else None,
+        "reason": m.reason,
+        "predicted_by": m.predicted_by,
+    }
+
+
+def _task_refs(pyramid: str, level: int, xy_level: np.ndarray) -> np.ndarray:
+    """Förstner's strongest full-resolution point in the window each level point covers."""
+    src = PyramidSource(pyramid)
+    try:
+        out = level_to_full(xy_level, level)
+        f = 2**level
+        half = max(2, f)  # search +- one level pixel around the mapped point
+        H, W = src.shape(0)
+        tile = 512
+        centre = np.rint(out).astype(int)
+        keys = (centre[:, 1] // tile) * (W // tile + 1) + centre[:, 0] // tile
+        for key in np.unique(keys):
+            sel = np.nonzero(keys == key)[0]
+            c0 = int(centre[sel, 0].min()) - half - 16
+            r0 = int(centre[sel, 1].min()) - half - 16
+            c1 = int(centre[sel, 0].max()) + half + 17
+            r1 = int(centre[sel, 1].max()) + half + 17
+            win = src.read(0, c0, r0, c1 - c0, r1 - r0)
+            pts = foerstner(win, radius=2, border=6)
+            if len(pts) == 0:
+                continue
+            pxy = pts.xy + np.array([c0, r0], dtype=float)
+            d = np.abs(pxy[None, :, :] - out[sel, None, :]).max(axis=2)  # Chebyshev distance
+            w = np.where(d <= half, pts.w[None, :], -np.inf)
+            best = np.argmax(w, axis=1)
+            okay = np.isfinite(w[np.arange(len(sel)), best])
+            inside = (pxy[best, 0] >= 0) & (pxy[best, 0] <= W - 1) & (pxy[best, 1] >= 0)
+            inside &= pxy[best, 1] <= H - 1
+            okay &= inside
+            out[sel[okay]] = pxy[best[okay]]
+    finally:
+        src.close()
+    return out
+
+
+def _task_track(
+    pyr_ref: str,
+    pyr_search: str,
+    ref_xy0: np.ndarray,
+    search_xy_level: np.ndarray,
+    affine: np.ndarray,
+    level: int,
+    options: MatchOptions,
+) -> dict:
+    from apygis.aerotri.lsm import track
+
+    ref, search = PyramidSource(pyr_ref), PyramidSource(pyr_search)
+    try:
+        res = track(
+            ref,
+            search,
+            ref_xy0,
+            search_xy_level,
+            affine,
+            start=level,
+            half=options.half,
+            corr_min=options.corr_min,
+        )
+    finally:
+        ref.close()
+        search.close()
+    return {
+        "xy": res.xy,
+        "sigma": res.sigma,
+        "corr": res.corr,
+        "ok": res.ok,
+        "reason": np.asarray(res.reason, int),
+    }
+
+
+# --- helpers ------------------------------------------------------------------------------
+
+
+def _level_transform(T: PixelTransform, level: int) -> PixelTransform:
+    """Pixel -> photo transform of a pyramid level: ``T L_k`` (``L_k`` = level_to_full)."""
+    f = 2.0**level
+    L = np.array([[f, 0.0, (f - 1) / 2], [0.0, f, (f - 1) / 2], [0.0, 0.0, 1.0]])
+    return PixelTransform(T.matrix @ L)
+
+
+def intermediate_level(source_shape: tuple[int, int], levels: int, max_px: int) -> int:
+    """The first pyramid level whose long side is at most ``max_px``."""
+    h, w = source_shape
+    for k in range(levels):
+        if max(-(-h // 2**k), -(-w // 2**k)) <= max_px:
+            return k
+    return levels - 1
+
+
+def _approx_eo(X: float, Y: float, Z: float, heading_deg: float) -> ExteriorOrientation:
+    return ExteriorOrientation(X, Y, Z, 0.0, 0.0, math.radians(90.0 - heading_deg))
+
+
+def _homography_fit(xa: np.ndarray, xb: np.ndarray) -> np.ndarray | None:
+    import cv2
+
+    if len(xa) < 8:
+        return None
+    H, _ = cv2.findHomography(xa.astype(np.float64), xb.astype(np.float64), cv2.LMEDS)
+    return None if H is None else H / H[2, 2]
+
+
+def _jacobian(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """The 2 x 2 derivative of the homography ``H`` at the points ``xy`` (n x 2)."""
+    x, y = xy[:, 0], xy[:, 1]
+    w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
+    u = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w
+    v = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w
+    J = np.empty((len(xy), 2, 2))
+    J[:, 0, 0] = (H[0, 0] - u * H[2, 0]) / w
+    J[:, 0, 1] = (H[0, 1] - u * H[2, 1]) / w
+    J[:, 1, 0] = (H[1, 0] - v * H[2, 0]) / w
+    J[:, 1, 1] = (H[1, 1] - v * H[2, 1]) / w
+    return J
+
+
+def _spread_pick(xy: np.ndarray, n: int, cell: float) -> np.ndarray:
+    """Indices of at most ``n`` points, one per grid cell first (spread over the model)."""
+    if len(xy) <= n:
+        return np.arange(len(xy))
+    key = np.floor(xy / cell).astype(np.int64)
+    _, first = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
+    rng = np.random.default_rng(0)
+    if len(first) >= n:
+        return np.sort(rng.choice(first, n, replace=False))
+    rest = np.setdiff1d(np.arange(len(xy)), first)
+    return np.sort(np.concatenate([first, rng.choice(rest, n - len(first), replace=False)]))
+
+
+# --- the pipeline -------------------------------------------------------------------------
+
+
+def match_block(
+    block: Block, options: MatchOptions | None = None, *, progress=None, terrain_z=None
+) -> MatchReport:
+    """Measure tie points in a block (module docstring); returns a report."""
+    from apygis.progress import phase
+
+    opt = options or MatchOptions()
+    images = {im.image: im for im in block.images()}
+    if not images:
+        raise BlockError(f"{block.path}: the block has no images")
+    cams = block.cameras()
+    bplan = block_plan(block, terrain_z=terrain_z)
+    pairs = bplan.pairs
+    if not pairs:
+        raise BlockError(f"{block.path}: the plan has no overlapping image pairs")
+    block.set_pairs((p.a, p.b, p.kind, p.overlap) for p in pairs)
+    tz = terrain_height(block, terrain_z)
+    run = block.start_run("match", {k: v for k, v in vars(opt).items()})
+    steps = 6
+
+    def stage(i: int):
+        return phase(progress, i, steps) if progress is not None else None
+
+    seconds: dict[str, float] = {}
+    clock = [time.perf_counter()]
+
+    def lap(name: str) -> None:
+        now = time.perf_counter()
+        seconds[name] = round(now - clock[0], 3)
+        clock[0] = now
+
+    try:
+        with Runner(opt.scheduler, opt.workers) as runner:
+            lap("start")
+            pyr = _stage_pyramids(block, images, runner, stage(0))
+            lap("pyramids")
+            transforms, flagged = _stage_interior(block, images, cams, pyr, runner, stage(1))
+            lap("interior")
+            src0 = PyramidSource(next(iter(pyr.values())))
+            level = intermediate_level(src0.shape(0), src0.levels, opt.intermediate_px)
+            src0.close()
+            feats = _stage_features(block, images, pyr, level, opt, runner, stage(2))
+            lap("features")
+            failed = _stage_pairs(
+                block, bplan, images, cams, pyr, transforms, feats, level, tz, opt, runner, stage(3)
+            )
+            lap("pairs")
+            report = _stage_tracking(
+                block, bplan, images, pyr, transforms, feats, level, opt, runner, stage(4)
+            )
+            lap("tracking")
+        report.pairs_failed = failed
+        report.flagged_interior = flagged
+        report.gaps = _stage_gaps(block, bplan, images, tz)
+        lap("gaps")
+        report.seconds = seconds
+        if progress is not None:
+            progress(1, 1)
+    except BaseException as exc:
+        block.finish_run(run, "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed",
+                         {"error": str(exc)})  # fmt: skip
+        raise
+    block.finish_run(
+        run,
+        "done",
+        {"points": report.points, "observations": report.observations, "level": level},
+    )
+    return report
+
+
+def _stage_pyramids(block: Block, images, runner: Runner, progress) -> dict[int, str]:
+    folder = block.pyramid_folder
+    out = {n: str(folder / f"{n}.tif") for n in images}
+    todo = [
+        (n, (str(im.path), out[n]))
+        for n, im in images.items()
+        if not (block.task_done("pyramid", str(n)) and Path(out[n]).is_file())
+    ]
+    for k, (n, _) in enumerate(runner.run(_task_pyramid, todo), 1):
+        block.mark_task("pyramid", str(n))
+        if progress is not None:
+            progress(k, len(todo))
+    return out
+
+
+def _stage_interior(block: Block, images, cams, pyr, runner: Runner, progress):
+    done = block.interior()
+    todo = []
+    for n, im in images.items():
+        cam = cams[im.camera]
+        if n in done:
+            continue
+        if cam.kind == "digital":
+            T = PixelTransform.digital(im.width, im.height, float(cam.pixel_um or 0))
+            block.set_interior(
+                n,
+                {"model": "digital", "transform": T.to_list(), "rms_um": None, "max_um": None,
+                 "flagged": False},
+            )  # fmt: skip
+        else:
+            todo.append((n, (pyr[n], cam.to_dict(), n)))
+    for k, (n, res) in enumerate(runner.run(_task_interior, todo), 1):
+        block.set_interior(int(n), res)
+        if progress is not None:
+            progress(k, len(todo))
+    interior = block.interior()
+    transforms = {n: PixelTransform.from_list(interior[n]["transform"]) for n in images}
+    flagged = sorted(n for n in images if interior[n].get("flagged"))
+    return transforms, flagged
+
+
+def _stage_features(block: Block, images, pyr, level: int, opt: MatchOptions, runner, progress):
+    feats: dict[int, np.ndarray] = {}
+    todo = []
+    for n in images:
+        xy = block.features(n, level)
+        if xy is None:
+            todo.append((n, (pyr[n], level, opt.points_per_image)))
+        else:
+            feats[n] = xy
+    for k, (n, xy) in enumerate(runner.run(_task_features, todo), 1):
+        block.set_features(int(n), level, xy)
+        feats[int(n)] = np.asarray(xy, float)
+        if progress is not None:
+            progress(k, len(todo))
+    return feats
+
+
+def _stage_pairs(
+    block, bplan, images, cams, pyr, transforms, feats, level, tz, opt, runner, progress
+):
+    from apygis.aerotri.fbm import homography_from_orientations
+
+    status = {(p["a"], p["b"]): p["status"] for p in block.pairs()}
+    todo = []
+    for p in bplan.pairs:
+        if status.get((p.a, p.b)) in ("matched", "failed"):
+            continue
+        ia, ib = images[p.a], images[p.b]
+        cam = cams[ia.camera]
+        predict = None
+        try:
+            predict = homography_from_orientations(
+                _approx_eo(ia.X, ia.Y, ia.Z, bplan.headings[p.a]),
+                _approx_eo(ib.X, ib.Y, ib.Z, bplan.headings[p.b]),
+                cam.focal_mm,
+                transforms[p.a],
+                transforms[p.b],
+                tz,
+                level=level,
+                principal_point_mm=(cam.x0_mm, cam.y0_mm),
+            )
+        except OrientationError:
+            predict = None
+        todo.append(
+            (
+                (p.a, p.b),
+                (pyr[p.a], pyr[p.b], level, feats[p.a], feats[p.b], predict, p.kind,
+                 transforms[p.a].to_list(), transforms[p.b].to_list(), cam.focal_mm, opt),
+            )
+        )  # fmt: skip
+    for k, (key, res) in enumerate(runner.run(_task_pair, todo), 1):
+        a, b = key
+        st = "matched" if len(res["idx_a"]) else "failed"
+        block.set_pair_matches(a, b, res["idx_a"], res["idx_b"], st, res["sigma_px"], res["reason"])
+        if progress is not None:
+            progress(k, len(todo))
+    return [(p["a"], p["b"], p["reason"]) for p in block.pairs() if p["status"] == "failed"]
+
+
+def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, runner, progress):
+    from apygis.aerotri.lsm import LsmReason
+    from apygis.aerotri.tracks import link
+
+    matches = block.pair_matches()
+    tracks = link([(a, b, ia, ib) for a, b, ia, ib in matches if len(ia)])
+    mult = tracks.multiplicity
+    # 2-fold points selectively: at most max_twofold_per_pair per pair, spread out
+    keep = mult >= 3
+    two = np.nonzero(mult == 2)[0]
+    if len(two):
+        first = tracks.offsets[two]
+        ia = np.array([tracks.images[i] for i in tracks.image[first]])
+        ib = np.array([tracks.images[i] for i in tracks.image[first + 1]])
+        for a, b in set(zip(ia.tolist(), ib.tolist(), strict=True)):
+            sel = two[(ia == a) & (ib == b)]
+            xy = feats[a][tracks.point[tracks.offsets[sel]]]
+            h, w = PyramidSource(pyr[a]).shape(level)
+            pick = _spread_pick(xy, opt.max_twofold_per_pair, max(h, w) / 25)
+            keep[sel[pick]] = True
+    kept = np.nonzero(keep)[0]
+    # reference image of each point: the one where it lies closest to the image centre
+    nodes: list[list[tuple[int, int]]] = [
+        [(int(i), int(p)) for i, p in tracks[int(t)]]  # type: ignore[call-overload]
+        for t in kept
+    ]
+    ref_of: list[tuple[int, int]] = []
+    for nd in nodes:
+        best, bd = nd[0], np.inf
+        for img, pi in nd:
+            h, w = images[img].height / 2**level, images[img].width / 2**level
+            x, y = feats[img][pi]
+            d = (x / w - 0.5) ** 2 + (y / h - 0.5) ** 2
+            if d < bd:
+                best, bd = (img, pi), d
+        ref_of.append(best)
+    # refine reference points at full resolution (Förstner again), per image
+    by_ref: dict[int, list[int]] = {}
+    for t, (img, _) in enumerate(ref_of):
+        by_ref.setdefault(img, []).append(t)
+    todo = [
+        (img, (pyr[img], level, feats[img][[ref_of[t][1] for t in ts]]))
+        for img, ts in by_ref.items()
+    ]
+    ref_xy0 = np.zeros((len(nodes), 2))
+    for img, xy0 in runner.run(_task_refs, todo):
+        ref_xy0[by_ref[int(img)]] = xy0
+    # homographies between images that share points (level L), for the affine approximations
+    pair_xy: dict[tuple[int, int], tuple[list, list]] = {}
+    for t, nd in enumerate(nodes):
+        r_img, r_pi = ref_of[t]
+        for img, pi in nd:
+            if img != r_img:
+                pa, pb = pair_xy.setdefault((r_img, img), ([], []))
+                pa.append(feats[r_img][r_pi])
+                pb.append(feats[img][pi])
+    tasks = []
+    index: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    for t, nd in enumerate(nodes):
+        r_img, r_pi = ref_of[t]
+        for img, pi in nd:
+            if img != r_img:
+                index.setdefault((r_img, img), []).append((t, pi))
+    for (r_img, img), items in index.items():
+        ts = np.array([t for t, _ in items])
+        pis = np.array([p for _, p in items])
+        xa = np.asarray(pair_xy[(r_img, img)][0], float)
+        xb = np.asarray(pair_xy[(r_img, img)][1], float)
+        H = _homography_fit(xa, xb)
+        ref_L = full_to_level(ref_xy0[ts], level)
+        if H is not None:
+            A = _jacobian(H, ref_L)
+            start = feats[img][pis] + np.einsum(
+                "nij,nj->ni", A, ref_L - feats[r_img][[ref_of[t][1] for t in ts]]
+            )
+        else:
+            A = np.tile(np.eye(2), (len(ts), 1, 1))
+            start = feats[img][pis] + (ref_L - feats[r_img][[ref_of[t][1] for t in ts]])
+        tasks.append(((r_img, img), (pyr[r_img], pyr[img], ref_xy0[ts], start, A, level, opt)))
+    results: dict[tuple[int, int], dict] = {}
+    for k, (key, res) in enumerate(runner.run(_task_track, tasks), 1):
+        results[key] = res
+        if progress is not None:
+            progress(k, len(tasks))
+    # assemble observations
+    jump = 2.0**level * 2.0
+    rejected = {"jumped": 0, "fewer than 2 images": 0}
+    obs: dict[int, list[tuple[int, float, float, float, float]]] = {
+        t: [] for t in range(len(nodes))
+    }
+    for (r_img, img), items in index.items():
+        res = results[(r_img, img)]
+        for j, (t, pi) in enumerate(items):
+            if not res["ok"][j]:
+                why = LsmReason(int(res["reason"][j])).name.lower().replace("_", " ")
+                rejected[f"lsm: {why}"] = rejected.get(f"lsm: {why}", 0) + 1
+                continue
+            approx = level_to_full(feats[img][pi][None, :], level)[0]
+            if np.abs(res["xy"][j] - approx).max() > jump:
+                rejected["jumped"] += 1
+                continue
+            obs[t].append((img, float(res["xy"][j][0]), float(res["xy"][j][1]),
+                           float(res["sigma"][j]), float(res["corr"][j])))  # fmt: skip
+    good = [t for t in range(len(nodes)) if len(obs[t]) >= 1]
+    rejected["fewer than 2 images"] = len(nodes) - len(good)
+    names = block.tie_names(len(good))
+    rows_pts = [
+        {"name": nm, "kind": "tie", "ref_image": ref_of[t][0]}
+        for nm, t in zip(names, good, strict=True)
+    ]
+    with block.conn:
+        block.conn.execute("DELETE FROM points WHERE kind = 'tie'")
+    ids = block.add_points(rows_pts)
+    rows = []
+    mult_table: dict[int, int] = {}
+    for nm, t in zip(names, good, strict=True):
+        pid = ids[nm]
+        r_img = ref_of[t][0]
+        sig = [o[3] for o in obs[t]]
+        allobs = [(r_img, float(ref_xy0[t][0]), float(ref_xy0[t][1]), float(np.median(sig)), 1.0)]
+        allobs += obs[t]
+        mult_table[len(allobs)] = mult_table.get(len(allobs), 0) + 1
+        for img, x, y, s, c in allobs:
+            mm = transforms[img].to_mm([[x, y]])[0]
+            src = "lsm-ref" if img == r_img else "lsm"
+            rows.append((pid, img, x, y, float(mm[0]), float(mm[1]), s, c, src))
+    with block.conn:
+        block.conn.executemany("INSERT INTO observations VALUES (?,?,?,?,?,?,?,?,?)", rows)
+    return MatchReport(
+        level=level,
+        images=len(images),
+        pairs=len(bplan.pairs),
+        pairs_failed=[],
+        points=len(good),
+        observations=len(rows),
+        multiplicity=dict(sorted(mult_table.items())),
+        rejected=rejected,
+    )
+
+
+def _stage_gaps(block: Block, bplan, images, tz: float) -> dict[tuple[int, int], list[int]]:
+    """Von Gruber counts per model from the tie points seen in both images."""
+    from apygis.orient.collinearity import InteriorOrientation, photo_to_ground
+
+    cams = block.cameras()
+    rows = block.conn.execute(
+        "SELECT o.point, o.image, o.x_mm, o.y_mm FROM observations o "
+        "JOIN points p ON p.id = o.point WHERE p.kind = 'tie'"
+    ).fetchall()
+    per_image: dict[int, dict[int, tuple[float, float]]] = {}
+    for pid, img, x, y in rows:
+        per_image.setdefault(img, {})[pid] = (x, y)
+    gaps: dict[tuple[int, int], list[int]] = {}
+    with block.conn:
+        block.conn.execute("DELETE FROM gaps")
+    for p in bplan.pairs:
+        a, b = p.a, p.b
+        common = sorted(set(per_image.get(a, {})) & set(per_image.get(b, {})))
+        im = images[a]
+        cam = cams[im.camera]
+        io = InteriorOrientation(cam.focal_mm, cam.x0_mm, cam.y0_mm)
+        eo = _approx_eo(im.X, im.Y, im.Z, bplan.headings[a])
+        if common:
+            mm = np.array([per_image[a][c] for c in common])
+            ground = photo_to_ground(mm, tz, eo, io)[:, :2]
+        else:
+            ground = np.empty((0, 2))
+        rep = planning.gap_report(bplan, p, ground)
+        with block.conn:
+            block.conn.executemany(
+                "INSERT INTO gaps VALUES (?, ?, ?, ?)",
+                [(a, b, k, int(c)) for k, c in enumerate(rep.counts)],
+            )
+        if rep.gaps:
+            gaps[(a, b)] = list(rep.gaps)
+    return gaps

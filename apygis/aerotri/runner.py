@@ -1,0 +1,87 @@
+"""Independent tasks run in this process, in local worker processes, or on a Dask cluster.
+
+``Runner(scheduler)`` with ``scheduler``:
+
+* ``"sync"``: one after the other in this process (tests, debugging, tiny blocks);
+* ``None`` / ``"processes"``: a local Dask cluster of worker processes, one
+  thread each (``workers`` processes; default: the machine's cores);
+* ``"tcp://host:port"`` (any Dask scheduler address): the same tasks on that
+  cluster; the workers must see the image files under the same paths.
+
+:meth:`Runner.run` yields ``(key, result)`` as tasks finish, in the calling
+process, so that the caller commits each result to the block as it arrives:
+an interrupted run keeps everything finished so far. A task that raises stops
+the run with that error (the remaining tasks are cancelled).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any
+
+__all__ = ["Runner"]
+
+log = logging.getLogger(__name__)
+
+
+class Runner:
+    """Runs tasks (see the module docstring); a context manager."""
+
+    def __init__(self, scheduler: str | None = None, workers: int | None = None):
+        self.scheduler = scheduler or "processes"
+        self.workers = workers
+        self._client: Any = None
+        self._cluster: Any = None
+
+    def __enter__(self) -> Runner:
+        if self.scheduler == "sync":
+            return self
+        from distributed import Client, LocalCluster
+
+        if self.scheduler == "processes":
+            n = self.workers or os.cpu_count() or 1
+            self._cluster = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+            )
+            self._client = Client(self._cluster)
+        else:
+            self._client = Client(self.scheduler, timeout="30s")
+        log.info("dask: %s", self._client)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._client is not None:
+            self._client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+        self._client = self._cluster = None
+
+    def run(
+        self, fn: Callable[..., Any], tasks: Iterable[tuple[Any, tuple]]
+    ) -> Iterator[tuple[Any, Any]]:
+        """``fn(*args)`` for each ``(key, args)``; yields ``(key, result)`` as they finish."""
+        if self._client is None:
+            for key, args in tasks:
+                yield key, fn(*args)
+            return
+        from distributed import as_completed
+
+        futures = {}
+        for key, args in tasks:
+            fut = self._client.submit(fn, *args, pure=False)
+            futures[fut] = key
+        if not futures:
+            return
+        try:
+            for fut in as_completed(list(futures)):
+                yield futures[fut], fut.result()
+        finally:
+            pending = [f for f in futures if not f.done()]
+            if pending:
+                self._client.cancel(pending)
