@@ -182,7 +182,8 @@ def render_design(
 
 #: half width (mm) of the coarse-search templates: inside the dark squares, so the
 #: template never sees the image around a mark
-_TEMPLATE_HALF_MM = {False: 3.5, True: 1.75}
+#: (a pixel size overestimated by 25 % still keeps them inside)
+_TEMPLATE_HALF_MM = {False: 3.0, True: 1.5}
 #: radius (mm) of the level-0 refinement window: inside the dark square (4 mm),
 #: outside the ring (1.3 mm)
 _REFINE_RADIUS_MM = 1.6
@@ -191,11 +192,12 @@ _REFINE_RADIUS_MM = 1.6
 def mark_template(pixel_mm: float, *, orientation: bool = False) -> np.ndarray:
     """The inner part of a mark (fiducial or orientation mark) at ``pixel_mm`` per pixel.
 
-    A square of side ``2 * 3.5`` mm (fiducial) or ``2 * 1.75`` mm (orientation mark),
-    odd size, centred on the mark: only the dark square, disk and ring, no surround.
+    A square of side about ``2 * 3`` mm (fiducial) or ``2 * 1.5`` mm (orientation
+    mark), odd size, centred on the mark: only the dark square, disk and ring, no
+    surround (the squares' half sides are 4 and 2 mm).
     """
     half = _TEMPLATE_HALF_MM[orientation]
-    n = 2 * max(2, int(np.ceil(half / pixel_mm))) + 1
+    n = 2 * max(2, int(np.floor(half / pixel_mm))) + 1
     p = float(pixel_mm)
     t = PixelTransform.affine(p, 0.0, 0.0, -p, -(n - 1) / 2 * p, (n - 1) / 2 * p)
     return render_design(t, (n, n), orientation=orientation, subsamples=4)
@@ -235,18 +237,24 @@ def find_candidates(
     threshold: float = 0.5,
     max_candidates: int = 40,
     separation_mm: float = 5.0,
+    scales: tuple[float, ...] = (1.0,),
 ) -> tuple[np.ndarray, np.ndarray]:
     """Candidate marks in a (coarse) image: positions ``(n, 2)`` (col, row) and NCC scores.
 
     The local maxima of :func:`ncc_map` with the mark's template at ``pixel_mm``
     (the design is invariant to rotations by 90 degrees and mirrors, and nearly
-    so to the scan's small rotation) above ``threshold``, at least
+    so to the scan's small rotation; with several ``scales``, templates at
+    ``pixel_mm * scale`` each and the largest correlation per pixel, for a pixel
+    size known only roughly) above ``threshold``, at least
     ``separation_mm`` apart, best first; positions to sub-pixel by a parabola
     through the maximum and its neighbours in each axis.
     """
     from scipy import ndimage
 
-    rho = ncc_map(image, mark_template(pixel_mm, orientation=orientation))
+    rho = ncc_map(image, mark_template(pixel_mm * scales[0], orientation=orientation))
+    for f in scales[1:]:
+        more = ncc_map(image, mark_template(pixel_mm * f, orientation=orientation))
+        np.maximum(rho, more, out=rho)
     size = max(3, 2 * int(separation_mm / pixel_mm / 2) + 1)
     peak = (rho == ndimage.maximum_filter(rho, size=size, mode="nearest")) & (rho >= threshold)
     rows, cols = np.nonzero(peak)
@@ -281,7 +289,8 @@ class MarkFit:
     deviations from the fit; ``background`` and ``contrast``: the fitted dark
     level and bright-minus-dark (DN); ``r2``: the share of the window's variance
     the model explains (1 for a perfect mark); ``ok``: converged with
-    ``r2 >= 0.8`` and a contrast of at least 20 DN.
+    ``r2 >= 0.8`` and a contrast of at least 20 DN (converged: the last
+    Gauss-Newton step below 0.01 px).
     """
 
     xy: tuple[float, float]
@@ -387,8 +396,11 @@ def refine_mark(
         sigma = np.sqrt(np.abs(np.diag(cov)[:2]))
         sst = float(((gs - gs.mean()) ** 2).sum())
         r2 = 1.0 - float(res @ res) / sst if sst > 0 else 0.0
-        if float(np.hypot(dx[0], dx[1])) < 1e-4:
-            converged = True
+        step = float(np.hypot(dx[0], dx[1]))
+        # converged: the last step far below the precision (the piecewise-linear edges
+        # and the window's pixel set can leave a ~1e-3 px oscillation)
+        converged = step < 0.01
+        if step < 1e-4:
             break
     ok = bool(
         converged

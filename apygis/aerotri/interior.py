@@ -355,7 +355,8 @@ def interior_orientation(
     ``source``: the scan (an :class:`ImageSource`; level 0 is read only in small
     windows around the marks). ``approx_pixel_um``: the scan's pixel size, if
     known; otherwise it is taken as ``240 mm / long side`` (a scan of the
-    230 mm frame with a margin) and the search allows 0.7..1.4 times that.
+    230 mm frame with a margin) and the search allows 0.85..1.5 times that
+    (templates at 1, 1.15 and 1.3 times).
     ``name`` names the image in errors and notes. Raises
     :class:`OrientationError` when the marks found cannot determine ``model``
     with redundancy.
@@ -377,7 +378,10 @@ def interior_orientation(
     hl, wl = source.shape(level)
     pix_mm = pix0_mm * 2.0**level
     coarse = source.read(level, 0, 0, wl, hl)
-    xy, _ = find_candidates(coarse, pix_mm)
+    # without a pixel size: the scan covers the frame's marks (>= ~225 mm, so pixels
+    # of at least 0.93 x nominal) and usually a margin (up to ~1.5 x nominal)
+    scales = (1.0,) if approx_pixel_um else (1.0, 1.15, 1.3)
+    xy, _ = find_candidates(coarse, pix_mm, scales=scales)
     if len(xy) < 2:
         raise OrientationError(
             f"{where}: found {len(xy)} fiducial mark candidate(s) at pyramid level {level}; "
@@ -385,11 +389,11 @@ def interior_orientation(
         )
     omark = camera.orientation_mark_mm
     oxy, _ = (
-        find_candidates(coarse, pix_mm, orientation=True, threshold=0.6)
+        find_candidates(coarse, pix_mm, orientation=True, threshold=0.6, scales=scales)
         if omark is not None
         else (np.zeros((0, 2)), np.zeros(0))
     )
-    spread = (0.9, 1.1) if approx_pixel_um else (0.7, 1.4)
+    spread = (0.9, 1.1) if approx_pixel_um else (0.85, 1.5)
     scale_range = (pix_mm * spread[0], pix_mm * spread[1])
     tol = max(2.0, 3.0 * pix_mm)
     ranked = []

@@ -348,3 +348,13 @@ def test_digital_interior():
         digital_interior(cam, 7000, 13824)
     with pytest.raises(OrientationError, match="not a digital camera"):
         digital_interior(CAMERA, 100, 100)
+
+
+def test_an_unknown_pixel_size_is_found():
+    # 3000 px over 300 mm (100 um) with no pixel size given: the nominal guess is
+    # 240 mm / 3000 px = 80 um, 25 % off; the templates at 1, 1.15 and 1.3 x cover it
+    src = WindowedScan(3000, 0.1, CAMERA, code=1)
+    r = interior_orientation(src, CAMERA)
+    assert r.dihedral == 1
+    assert transform_rms_px(r.transform, src.transform) < TOL_PX
+    assert abs(r.transform.pixel_mm / 0.1 - 1.0) < 1e-4
