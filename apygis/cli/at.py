@@ -1,0 +1,254 @@
+"""``apygis at``: automatic aerotriangulation of a photo block (PHODIS AT)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from apygis.cli._common import progress_bar, run_guarded
+
+_block_new = click.Path(dir_okay=False, path_type=Path)
+_block = click.Path(dir_okay=False, path_type=Path)
+_in_file = click.Path(exists=True, dir_okay=False, path_type=Path)
+_picture = click.Path(dir_okay=False, path_type=Path)
+
+
+def _open(path: Path):
+    from apygis.aerotri.block import Block
+
+    return Block.open(path)
+
+
+def _bar(label: str):
+    return progress_bar(1000, label)
+
+
+def _advance(bar):
+    def cb(done: int, total: int) -> None:
+        bar.update(round(1000 * done / max(total, 1)) - bar.pos)
+
+    return cb
+
+
+def _check_picture(path: Path | None) -> None:
+    if path is not None and path.suffix.lower() not in (".png", ".pdf"):
+        raise click.BadParameter(f"{path}: the block display is written as .png or .pdf")
+
+
+@click.group("at")
+def at() -> None:
+    """Automatic aerotriangulation: block preparation, interior orientation, tie points."""
+
+
+@at.command("init")
+@click.argument("block", type=_block_new)
+@click.option(
+    "--camera",
+    required=True,
+    metavar="CAMERA",
+    help="Camera protocol (TOML), or 'exif' for a digital camera described by the images' EXIF.",
+)
+@click.option(
+    "--images",
+    required=True,
+    type=click.Path(exists=True, path_type=Path),
+    help="Image list (CSV: image,strip,file,X,Y,Z,heading_deg), or a folder of images "
+    "with EXIF GPS.",
+)
+@click.option("--control", type=_in_file, default=None, help="Control points (CSV).")
+@click.option("--crs", default=None, help="Block CRS (default: the UTM zone of EXIF positions).")
+@click.option("--terrain-height", type=float, default=None, help="Mean terrain height, metres.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing block.")
+@run_guarded
+def at_init(block, camera, images, control, crs, terrain_height, overwrite):
+    """Create BLOCK (an SQLite file) from a camera, an image list and control points."""
+    from apygis.aerotri.project import init_block
+
+    if camera != "exif" and not Path(camera).is_file():
+        raise click.BadParameter(
+            f"{camera}: no such camera file (or 'exif')", param_hint="--camera"
+        )
+    with _bar(f"reading {images}") as bar:
+        r = init_block(
+            block,
+            camera=camera,
+            images=images,
+            control=control,
+            crs=crs,
+            overwrite=overwrite,
+            terrain_z=terrain_height,
+            progress=_advance(bar),
+        )
+    click.echo(
+        f"{r.block}: {r.images} images in {r.strips} strips, camera {r.camera}, "
+        f"{r.control} control points, CRS {r.crs or '(none)'}"
+    )
+    for note in r.notes:
+        click.echo(f"note: {note}")
+
+
+@at.command("plan")
+@click.argument("block", type=_block)
+@click.option("--terrain-height", type=float, default=None, help="Mean terrain height, metres.")
+@click.option(
+    "--min-overlap",
+    type=click.FloatRange(0.01, 0.95),
+    default=0.1,
+    show_default=True,
+    help="Least overlap of a pair to match (fraction of the smaller footprint).",
+)
+@click.option(
+    "--subblock-strips",
+    type=click.IntRange(2, 1000),
+    default=None,
+    help="Subblocks of this many strips, overlapping by one strip.",
+)
+@click.option(
+    "--display", type=_picture, default=None, help="Block display picture (.png or .pdf)."
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the plan as JSON.")
+@run_guarded
+def at_plan(block, terrain_height, min_overlap, subblock_strips, display, as_json):
+    """Footprints, overlaps, strips, pairs to match and subblocks of BLOCK."""
+    from apygis.aerotri.plan import plan_text
+    from apygis.aerotri.project import plan
+    from apygis.aerotri.report import block_display_for, points_per_model
+
+    _check_picture(display)
+    with _open(block) as b:
+        p = plan(
+            b, terrain_z=terrain_height, min_overlap=min_overlap, subblock_strips=subblock_strips
+        )
+        counts = points_per_model(b)
+        if display is not None:
+            block_display_for(b, p, display)
+    if as_json:
+        click.echo(json.dumps(_plan_json(p), indent=1))
+    else:
+        click.echo(plan_text(p, points_per_pair=counts or None), nl=False)
+    if display is not None:
+        click.echo(f"block display: {display}", err=as_json)
+
+
+def _plan_json(p) -> dict:
+    return {
+        "images": len(p.images),
+        "main_direction_deg": p.main_direction_deg,
+        "strips": {
+            str(s.number): {"images": s.images, "direction_deg": s.direction_deg, "kind": s.kind}
+            for s in p.strips.values()
+        },
+        "pairs": [
+            {"a": q.a, "b": q.b, "kind": q.kind, "overlap": round(q.overlap, 4)} for q in p.pairs
+        ],
+        "subblocks": p.subblocks,
+        "forward_overlap": {str(k): v for k, v in p.overlaps.forward.items()},
+        "side_overlap": {f"{a}-{b}": v for (a, b), v in p.overlaps.side.items()},
+        "connected": p.connected,
+    }
+
+
+@at.command("match")
+@click.argument("block", type=_block)
+@click.option(
+    "--scheduler",
+    default=None,
+    metavar="ADDRESS",
+    help="Dask scheduler address (tcp://host:port); 'sync' runs in this process. "
+    "Default: local worker processes.",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(1, 1024),
+    default=None,
+    help="Local worker processes (default: the machine's cores).",
+)
+@click.option(
+    "--points-per-image",
+    type=click.IntRange(100, 100000),
+    default=5000,
+    show_default=True,
+    help="Förstner points per image for block formation.",
+)
+@click.option(
+    "--corr-min",
+    type=click.FloatRange(0.3, 0.99),
+    default=0.8,
+    show_default=True,
+    help="Least correlation of a least-squares match.",
+)
+@click.option("--terrain-height", type=float, default=None, help="Mean terrain height, metres.")
+@click.option(
+    "--display", type=_picture, default=None, help="Block display picture (.png or .pdf)."
+)
+@run_guarded
+def at_match(block, scheduler, workers, points_per_image, corr_min, terrain_height, display):
+    """Fully automatic tie points: block formation, then least-squares point tracking.
+
+    Results are committed to BLOCK as tasks finish: run again after an
+    interruption to continue where it stopped.
+    """
+    from apygis.aerotri.match import MatchOptions, match_block
+    from apygis.aerotri.project import block_plan
+    from apygis.aerotri.report import block_display_for
+
+    _check_picture(display)
+    opt = MatchOptions(
+        points_per_image=points_per_image, corr_min=corr_min, scheduler=scheduler, workers=workers
+    )
+    with _open(block) as b:
+        with _bar(f"matching {block}") as bar:
+            r = match_block(b, opt, progress=_advance(bar), terrain_z=terrain_height)
+        if display is not None:
+            block_display_for(b, block_plan(b, terrain_z=terrain_height), display)
+    click.echo(
+        f"{block}: {r.points} tie points, {r.observations} observations in {r.images} images "
+        f"(block formation at pyramid level {r.level})"
+    )
+    click.echo("multiplicity: " + ", ".join(f"{k}-fold {v}" for k, v in r.multiplicity.items()))
+    for a, b_, why in r.pairs_failed:
+        click.echo(f"pair {a}-{b_} not matched: {why}")
+    skipped = {k: v for k, v in r.rejected.items() if v}
+    if skipped:
+        click.echo("rejected: " + ", ".join(f"{k} {v}" for k, v in skipped.items()))
+    if r.flagged_interior:
+        click.echo(f"interior orientation flagged: images {r.flagged_interior}")
+    if r.gaps:
+        click.echo(f"gaps: {len(r.gaps)} models with von Gruber regions below 3 points "
+                   "('apygis at info' lists them)")  # fmt: skip
+    if display is not None:
+        click.echo(f"block display: {display}")
+
+
+@at.command("export")
+@click.argument("block", type=_block)
+@click.option(
+    "--tiepoints",
+    type=_picture,
+    required=True,
+    metavar="FILE.csv",
+    help="Tie point observations: point,image,x_px,y_px,x_mm,y_mm,sigma_px.",
+)
+@run_guarded
+def at_export(block, tiepoints):
+    """Export the tie point observations of BLOCK."""
+    from apygis.aerotri.report import export_tiepoints
+
+    with _open(block) as b:
+        n = export_tiepoints(b, tiepoints)
+    click.echo(f"{tiepoints}: {n} observations")
+
+
+@at.command("info")
+@click.argument("block", type=_block)
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@run_guarded
+def at_info(block, as_json):
+    """Images, interior orientations, tie points by multiplicity, observations per image, gaps."""
+    from apygis.aerotri.report import block_info, info_text
+
+    with _open(block) as b:
+        info = block_info(b)
+    click.echo(json.dumps(info, indent=1) if as_json else info_text(info), nl=as_json)
