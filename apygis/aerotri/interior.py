@@ -275,6 +275,10 @@ def digital_interior(camera: Camera, width: int, height: int) -> InteriorResult:
 _IDENTITY_ORDER = (0, 1, 3, 2, 4, 5, 7, 6)
 
 
+#: hypotheses are made from pairs among this many best candidates (all are counted)
+_PAIR_CANDIDATES = 16
+
+
 def _pick_level(source: ImageSource, target: int = 800) -> int:
     sizes = [max(source.shape(k)) for k in range(source.levels)]
     return int(np.argmin([abs(math.log(s / target)) for s in sizes]))
@@ -291,7 +295,7 @@ def _similarity_search(
     n, m = len(q), len(fid)
     if n < 2 or m < 2:
         return 0, None
-    i, j = np.triu_indices(n, 1)
+    i, j = np.triu_indices(min(n, _PAIR_CANDIDATES), 1)  # the best-scoring ones pair up
     a, b = np.nonzero(~np.eye(m, dtype=bool))
     dq = (q[j] - q[i])[:, None]
     dm = (fid[b] - fid[a])[None, :]
@@ -369,6 +373,10 @@ def interior_orientation(
             f"{where}: unknown interior orientation model {model!r} (expected similarity, "
             "affine or projective)"
         )
+    if approx_pixel_um is not None and not (
+        math.isfinite(approx_pixel_um) and 0.1 <= approx_pixel_um <= 1000.0
+    ):
+        raise OrientationError(f"{where}: approx_pixel_um {approx_pixel_um} is not in 0.1..1000 um")
     names = list(camera.fiducials)
     fid_mm = camera.fiducial_array
     fid = fid_mm[:, 0] + 1j * fid_mm[:, 1]
