@@ -455,12 +455,17 @@ def interior_orientation(
     search = max(1.0, 4.0 * pix_mm)
     found: dict[str, tuple[float, float]] = {}
     missing: list[str] = []
+    # a mark counts only with its whole disk and ring (1.6 mm) inside the scan: the
+    # edge padding of a window would bias a cut mark
+    reach = 1.6 / float(np.sqrt(abs(np.linalg.det(lin0))))
+
+    def inside(xy) -> bool:
+        c, r = xy
+        return reach <= c <= w0 - 1 - reach and reach <= r <= h0 - 1 - reach
+
     for nm_, p in zip(names, pred0, strict=True):
-        if not (-0.5 <= p[0] <= w0 - 0.5 and -0.5 <= p[1] <= h0 - 0.5):
-            missing.append(nm_)
-            continue
-        fit = refine_mark(source, p, lin0, search_mm=search)
-        if fit.ok:
+        fit = refine_mark(source, p, lin0, search_mm=search) if inside(p) else None
+        if fit is not None and fit.ok and inside(fit.xy):
             found[nm_] = fit.xy
         else:
             missing.append(nm_)

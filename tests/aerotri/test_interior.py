@@ -358,3 +358,14 @@ def test_an_unknown_pixel_size_is_found():
     assert r.dihedral == 1
     assert transform_rms_px(r.transform, src.transform) < TOL_PX
     assert abs(r.transform.pixel_mm / 0.1 - 1.0) < 1e-4
+
+
+def test_a_mark_cut_by_the_scan_edge_is_missing(scan, base):
+    # crop the scan just outside mark 6's ring (17 px = 1.36 mm from its centre; the
+    # ring ends at 1.3 mm): the fit alone would accept it (r2 ~0.89) with a 0.05 px
+    # bias from the edge padding; it must be reported missing, the other 7 orient
+    col6 = int(base[2].to_px([FIDUCIALS["6"]])[0, 0])
+    crop = np.ascontiguousarray(scan.array(0)[:, : col6 + 17])
+    r = interior_orientation(ArraySource(crop), CAMERA, approx_pixel_um=80.0)
+    assert r.missing == ["6"]
+    assert transform_rms_px(r.transform, base[2]) < TOL_PX
