@@ -294,9 +294,6 @@ class _Scene:
     """The ground texture ``g(x, y)`` (local metres, relative to the block centre)."""
 
     def __init__(self, spec: SynthSpec, lake: tuple[float, float, float, float] | None, roads):
-        import cv2
-
-        self._cv2 = cv2
         rng = np.random.default_rng([spec.seed, 11])
         self.spacing = spec.gsd / spec.supersample  # sub-sample spacing on the ground
         self.gsd = spec.gsd
@@ -326,9 +323,9 @@ class _Scene:
         shp = u.shape
         if u32.ndim != 2:
             u32, v32 = u32.reshape(1, -1), v32.reshape(1, -1)
-        out = self._cv2.remap(
-            self.tile, u32, v32, self._cv2.INTER_LINEAR, borderMode=self._cv2.BORDER_REPLICATE
-        )
+        import cv2
+
+        out = cv2.remap(self.tile, u32, v32, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         return out.reshape(shp)
 
     def detail(self, x, y) -> np.ndarray:
@@ -390,10 +387,10 @@ class _Scene:
         if fi.size:
             xf, yf = x.ravel()[fi], y.ravel()[fi]
             crowns = np.maximum(
-                self._crowns(xf, yf, 4.5, 0.0, 5), self._crowns(xf, yf, 5.3, 0.5, 6)
+                self._crowns(xf, yf, 4.3, 0.23, 5), self._crowns(xf, yf, 5.9, 0.91, 6)
             )
-            k = _fade(4.5, sp)
-            g.ravel()[fi] = 70.0 + k * (crowns - 70.0)
+            k = _fade(4.3, sp)
+            g.ravel()[fi] = 67.0 + k * (crowns - 67.0)  # 67: the crowns' mean
             namp.ravel()[fi] = 5.0
         # hedges / furrows along the parcel edges
         hedge = edge < 1.0
@@ -422,17 +419,21 @@ class _Scene:
         g, a = self.base(x, y)
         return np.clip(g + a * self.detail(x, y), 30.0, 220.0).astype(np.float32)
 
-    def _crowns(self, x, y, cell: float, shift: float, salt: int):
-        ci = np.floor(x / cell + shift)
-        cj = np.floor(y / cell + shift)
+    def _crowns(self, x, y, cell: float, angle: float, salt: int):
+        """Tree crowns: one per cell of a lattice turned by ``angle``, jittered, with
+        its own size and brightness, lit from the north-west."""
+        c, s = math.cos(angle), math.sin(angle)
+        p = (x * c + y * s) / cell
+        q = (y * c - x * s) / cell
+        ci, cj = np.floor(p), np.floor(q)
         h = _hash(ci, cj, salt)
-        cx = (ci - shift + 0.5 + 0.36 * (h - 0.5)) * cell
-        cy = (cj - shift + 0.5 + 0.36 * (np.modf(h * 256.0)[0] - 0.5)) * cell
-        r = cell * (0.33 + 0.12 * np.modf(h * 65536.0)[0])
-        dx, dy = (x - cx) / r, (y - cy) / r
-        q = dx * dx + dy * dy
-        shade = 0.75 + 0.25 * (0.7 * dy - 0.7 * dx)
-        return np.where(q < 1.0, 45.0 + 110.0 * (1.0 - q) * shade, 38.0)
+        du = p - (ci + 0.5 + 0.4 * (h - 0.5))
+        dv = q - (cj + 0.5 + 0.4 * (np.modf(h * 256.0)[0] - 0.5))
+        r = 0.28 + 0.12 * np.modf(h * 65536.0)[0]
+        k = (du * du + dv * dv) / (r * r)
+        lit = (0.7 * (dv * c + du * s) - 0.7 * (du * c - dv * s)) / r  # towards NW
+        bright = 0.75 + 0.35 * np.modf(h * 16.0)[0]
+        return np.where(k < 1.0, 40.0 + 120.0 * bright * (1.0 - k) * (0.8 + 0.2 * lit), 36.0)
 
     def _buildings(self, u, v, zone, ground):
         """Ground with buildings at parcel coordinates ``(u, v)``; and the roof mask.

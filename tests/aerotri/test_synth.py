@@ -242,3 +242,38 @@ def test_digital_block(tmp_path):
     px = np.array([[0.0, 0.0], [239.0, 159.0], [120.3, 80.7]])
     assert np.abs(truth.project(102, truth.ground(102, px)) - px).max() < 1e-6
     assert truth.lake is None
+
+
+def test_layout_headings_and_cross_strips():
+    from apygis.aerotri.synth import _build_truth
+
+    spec = SynthSpec(strips=2, images_per_strip=3, cross_strips=1, size_px=200)
+    truth = _build_truth(spec)
+    cross = [n for n in truth.images if truth.strip[n] == 3]
+    assert len(cross) >= 2
+    assert cross[0] == 301
+    # kappa = radians(90 - heading) within the +-1 deg of the attitude noise
+    for n in truth.images:
+        k = np.radians(90.0 - truth.heading[n]) - truth.exterior[n].kappa_rad
+        assert abs(np.angle(np.exp(1j * k))) < np.radians(1.0) + 1e-12
+        assert abs(truth.exterior[n].omega_rad) < np.radians(1.5)  # 5 sigma of 0.3 deg
+    assert {truth.heading[n] for n in (101, 102, 103)} == {90.0}
+    assert {truth.heading[n] for n in (201, 202, 203)} == {270.0}
+    assert {truth.heading[n] for n in cross} == {0.0}
+    # strip 1 flies east: its image numbers increase eastwards; strip 2 westwards
+    assert truth.exterior[101].Xo < truth.exterior[103].Xo
+    assert truth.exterior[201].Xo > truth.exterior[203].Xo
+    assert truth.exterior[101].Yo > truth.exterior[201].Yo  # strip 1 in the north
+    # the cross strip runs north across both strips
+    assert truth.exterior[cross[0]].Yo < truth.exterior[cross[-1]].Yo
+
+
+def test_truth_pickles_for_parallel_rendering(block):
+    import pickle
+
+    _, truth = block
+    truth.texture([truth.origin[0]], [truth.origin[1]])  # builds the scene
+    again = pickle.loads(pickle.dumps(truth))
+    assert np.array_equal(
+        render_image(again, 101, noise=False), render_image(truth, 101, noise=False)
+    )
