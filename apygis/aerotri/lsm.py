@@ -141,6 +141,18 @@ def _bspline_weights(f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return w, d
 
 
+def _weights4(f: np.ndarray, grad: bool):
+    """:func:`_bspline_weights` as tuples of arrays (the fast path of the gather)."""
+    f2 = f * f
+    f3 = f2 * f
+    g = 1 - f
+    w = (g * g * g * (1 / 6), 0.5 * f3 - f2 + (2 / 3), 0.5 * (f2 + f - f3) + (1 / 6), f3 * (1 / 6))
+    if not grad:
+        return w, ()
+    d = (-0.5 * g * g, 1.5 * f2 - 2 * f, f - 1.5 * f2 + 0.5, 0.5 * f2)
+    return w, d
+
+
 class SplineImage:
     """The cubic B-spline interpolant of an image window.
 
@@ -184,83 +196,126 @@ class SplineImage:
             & (r <= self.height - 1 - margin)
         )
 
-    def _gather(self, xy, grad: bool):
-        xy = np.asarray(xy, dtype=float)
-        shape = xy.shape[:-1]
-        c = (xy[..., 0] - self.col0).ravel()
-        r = (xy[..., 1] - self.row0).ravel()
+    def _gather(self, c: np.ndarray, r: np.ndarray, grad: bool):
+        """Values (and derivatives) at window coordinates ``c, r`` (flat float arrays)."""
         hh, ww = self.coef.shape
         p = self._PAD
         # clamp far-outside points to the padded range (values there are meaningless)
-        c = np.clip(c, -p + 1, ww - 2 * p + p - 3.0)
-        r = np.clip(r, -p + 1, hh - 2 * p + p - 3.0)
+        c = np.clip(c, 1.0 - p, ww - p - 3.0)
+        r = np.clip(r, 1.0 - p, hh - p - 3.0)
         dt = self.coef.dtype
         flat = self.coef.ravel()
-        offs = (np.arange(4)[:, None] * ww + np.arange(4)[None, :]).ravel()
+        offs = (np.arange(4)[:, None] * ww + np.arange(4)[None, :]).ravel()[:, None]
         n = c.size
         val = np.empty(n, dtype=dt)
         gc = np.empty(n if grad else 0, dtype=dt)
         gr = np.empty(n if grad else 0, dtype=dt)
-        step = 1 << 17
+        step = 1 << 15  # chunks that stay in cache
         for s in range(0, n, step):
             cs, rs = c[s : s + step], r[s : s + step]
             ci, ri = np.floor(cs), np.floor(rs)
             fc, fr = (cs - ci).astype(dt), (rs - ri).astype(dt)
             base = (ri.astype(np.intp) + (p - 1)) * ww + (ci.astype(np.intp) + (p - 1))
-            C = flat.take(base[:, None] + offs).reshape(-1, 4, 4)
-            wc, dc = _bspline_weights(fc)
-            wr, dr = _bspline_weights(fr)
-            rowv = np.einsum("nij,nj->ni", C, wc)
-            val[s : s + step] = np.einsum("ni,ni->n", rowv, wr)
+            C = flat.take(offs + base[None, :])  # (16, k): node (i, j) at 4 i + j
+            wc, dc = _weights4(fc, grad)
+            wr, dr = _weights4(fr, grad)
+            v = gcs = grs = 0.0
+            for i in range(4):
+                rv = C[4 * i] * wc[0] + C[4 * i + 1] * wc[1] + C[4 * i + 2] * wc[2]
+                rv += C[4 * i + 3] * wc[3]
+                v = v + rv * wr[i]
+                if grad:
+                    rd = C[4 * i] * dc[0] + C[4 * i + 1] * dc[1] + C[4 * i + 2] * dc[2]
+                    rd += C[4 * i + 3] * dc[3]
+                    grs = grs + rv * dr[i]
+                    gcs = gcs + rd * wr[i]
+            val[s : s + step] = v
             if grad:
-                gr[s : s + step] = np.einsum("ni,ni->n", rowv, dr)
-                gc[s : s + step] = np.einsum("nij,nj,ni->n", C, dc, wr)
-        if not grad:
-            return val.reshape(shape)
-        return val.reshape(shape), gc.reshape(shape), gr.reshape(shape)
+                gc[s : s + step] = gcs
+                gr[s : s + step] = grs
+        return val, gc, gr
+
+    def _split(self, xy) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
+        xy = np.asarray(xy, dtype=float)
+        c = (xy[..., 0] - self.col0).ravel()
+        r = (xy[..., 1] - self.row0).ravel()
+        return c, r, xy.shape[:-1]
 
     def sample(self, xy) -> np.ndarray:
         """Interpolated values at ``xy`` (..., 2) (col, row in the level)."""
-        return self._gather(xy, grad=False)
+        c, r, shape = self._split(xy)
+        return self._gather(c, r, grad=False)[0].reshape(shape)
 
     def sample_grad(self, xy) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Values and derivatives ``d/dcol``, ``d/drow`` at ``xy`` (..., 2)."""
-        return self._gather(xy, grad=True)
+        c, r, shape = self._split(xy)
+        v, gc, gr = self._gather(c, r, grad=True)
+        return v.reshape(shape), gc.reshape(shape), gr.reshape(shape)
+
+    def sample_grad_cr(self, c: np.ndarray, r: np.ndarray):
+        """:meth:`sample_grad` at level coordinates given as two arrays of one shape."""
+        shape = np.shape(c)
+        v, gc, gr = self._gather(np.ravel(c) - self.col0, np.ravel(r) - self.row0, grad=True)
+        return v.reshape(shape), gc.reshape(shape), gr.reshape(shape)
 
 
 @cache
-def _q_table(k: int = 256) -> np.ndarray:
-    """``q(f) = sum_k w_k(f)^2`` of the cardinal cubic spline for ``f = i / k``, i = 0..k."""
+def _noise_tables(k: int = 512) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Noise factors of cubic spline interpolation of white noise, ``f = i / k``, i = 0..k.
+
+    With the cardinal kernel ``w_j(f)`` (value at ``f`` of the interpolant of a
+    unit impulse at node ``j``): ``q(f) = sum w_j^2`` (variance of the
+    interpolated noise, per unit pixel variance), ``q'(f) = 2 sum w_j w_j'``
+    (so ``E[e e'] = q'/2``) and ``D(f) = sum w_j'^2`` (variance of its derivative).
+    """
     n = 64
     d = np.zeros(n)
     d[n // 2] = 1.0
     b = ndimage.spline_filter1d(d, 3, mode="mirror")
     f = np.arange(k + 1) / k
-    x = n // 2 + f[:, None] - np.arange(-20, 21)[None, :]
-    w = ndimage.map_coordinates(b, [x.ravel()], order=3, prefilter=False, mode="mirror")
-    return (w.reshape(x.shape) ** 2).sum(axis=1)
+    w, dw = _bspline_weights(f)  # (k+1, 4): nodes -1..2 around floor(x)
+    j = np.arange(-20, 21)  # w_j(f) = K(f - j) = sum_i W_i(f) b[c - j - 1 + i]
+    idx = n // 2 - j[:, None] - 1 + np.arange(4)[None, :]  # (41, 4)
+    bb = b[idx]
+    kv = np.einsum("fi,ji->fj", w, bb)
+    kd = np.einsum("fi,ji->fj", dw, bb)
+    return (kv**2).sum(1), 2 * (kv * kd).sum(1), (kd**2).sum(1)
 
 
 def _q(x: np.ndarray) -> np.ndarray:
-    """Noise variance factor of spline interpolation at coordinate(s) ``x`` (one axis)."""
-    t = _q_table()
+    """Noise variance factor ``q`` of spline interpolation at coordinate(s) ``x`` (one axis)."""
+    t = _noise_tables()[0]
     k = len(t) - 1
     f = np.asarray(x, dtype=float) % 1.0
     return np.interp(f * k, np.arange(k + 1), t)
 
 
 @cache
-def _q_lookup_tables(k: int = 512) -> tuple[np.ndarray, np.ndarray]:
-    t = _q_table(k)
-    dt = np.gradient(t, 1.0 / k)
-    return t[:-1].astype(np.float32), dt[:-1].astype(np.float32)
+def _lookup_tables() -> np.ndarray:
+    return np.stack([t[:-1] for t in _noise_tables()]).astype(np.float32)
 
 
-def _q_dq(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``q`` and ``dq/dx`` at ``x`` (nearest of 512 fractions per pixel: fast, ample)."""
-    t, dt = _q_lookup_tables()
-    i = np.floor(x * len(t) + 0.5).astype(np.intp) % len(t)
-    return t.take(i), dt.take(i)
+def _q_dq(x: np.ndarray, with_d: bool = False) -> np.ndarray:
+    """``q``, ``q'`` (and ``D`` when ``with_d``) at ``x`` (nearest of 512 fractions per
+    pixel: fast and ample), stacked on a new first axis."""
+    t = _lookup_tables()
+    k = t.shape[1]  # a power of 2
+    # truncation is floor for x >= -0.5 / k; below, one table step off: negligible
+    i = (x * k + 0.5).astype(np.intp) & (k - 1)
+    return t[: 3 if with_d else 2, i]
+
+
+# Jacobian columns (dt_c, dt_r, dA00, dA01, dA10, dA11, dr0, dr1) = phi * lever with
+# phi in (a = r1 gc, b = r1 gr, 1, g) and lever in (1, u_c, u_r); the window sums of the
+# products phi_k phi_l (rows of P in lsm) times moments (1, uc, ur, uc^2, uc ur, ur^2).
+_PHI = np.array([0, 1, 0, 0, 1, 1, 2, 3])
+_LEV = np.array([0, 0, 1, 2, 1, 2, 0, 0])
+_PROD = np.array([[0, 1, 3, 5], [1, 2, 4, 6], [3, 4, 18, 8], [5, 6, 8, 7]])
+_MOM = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
+_N_PROD = _PROD[_PHI[:, None], _PHI[None, :]]
+_N_MOM = _MOM[_LEV[:, None], _LEV[None, :]]
+_B_PROD = np.array([9, 10, 11, 12])[_PHI]
+_B_MOM = _LEV
 
 
 def _offsets(half: int) -> np.ndarray:
@@ -308,12 +363,16 @@ def lsm(
     reason = res.reason
     iters = res.iterations
     s0sq = np.full(n, np.nan)
-    ninv = np.full((n, 8, 8), np.nan)
+    nmat = np.full((n, 8, 8), np.nan)
     corr = res.corr
 
     tpl_pos = ref_xy[:, None, :] + u[None, :, :]
     tpl = ref.sample(tpl_pos).astype(np.float64)
     q_ref = _q(ref_xy[:, 0]) * _q(ref_xy[:, 1])
+    tpl_sum = tpl.sum(axis=1)
+    tpl_sq = np.einsum("nm,nm->n", tpl, tpl)
+    uc, ur = u[:, 0], u[:, 1]
+    moments = np.stack([np.ones(m), uc, ur, uc * uc, uc * ur, ur * ur], axis=1)
     ref_in = ref.inside(ref_xy, half + 1.0)
     reason[~ref_in] = LsmReason.OUTSIDE
     active = np.flatnonzero(ref_in)
@@ -323,28 +382,39 @@ def lsm(
         if active.size == 0:
             break
         ta, Aa = t[active], A[active]
-        s = ta[:, None, :] + np.einsum("nab,mb->nma", Aa, u)
-        g, gc, gr = search.sample_grad(s)
-        g = g.astype(np.float64)
+        sc = ta[:, 0:1] + Aa[:, 0, 0:1] * u[:, 0] + Aa[:, 0, 1:2] * u[:, 1]
+        sr = ta[:, 1:2] + Aa[:, 1, 0:1] * u[:, 0] + Aa[:, 1, 1:2] * u[:, 1]
+        g32, gc, gr = search.sample_grad_cr(sc, sr)
+        g = g32.astype(np.float64)
         ra0, ra1 = r0[active], r1[active]
-        la = tpl[active] - ra0[:, None] - ra1[:, None] * g
-        rgc = ra1[:, None] * gc
-        rgr = ra1[:, None] * gr
-        J = np.stack(
-            [
-                rgc,
-                rgr,
-                rgc * u[:, 0],
-                rgc * u[:, 1],
-                rgr * u[:, 0],
-                rgr * u[:, 1],
-                np.ones_like(g),
-                g,
-            ],
-            axis=2,
-        )
-        N = np.matmul(J.transpose(0, 2, 1), J)
-        b = np.einsum("nmk,nm->nk", J, la)
+        tpa = tpl[active]
+        la = tpa - ra0[:, None] - ra1[:, None] * g
+        qc, dqc = _q_dq(sc)
+        qr, dqr = _q_dq(sr)
+        # all window sums as one matrix product: P (n, 19, m) @ moments (m, 6)
+        P = np.empty((active.size, 19, m))
+        ga = np.multiply(ra1[:, None], gc, out=P[:, 3])
+        gb = np.multiply(ra1[:, None], gr, out=P[:, 4])
+        np.multiply(ga, ga, out=P[:, 0])
+        np.multiply(ga, gb, out=P[:, 1])
+        np.multiply(gb, gb, out=P[:, 2])
+        np.multiply(ga, g, out=P[:, 5])
+        np.multiply(gb, g, out=P[:, 6])
+        np.multiply(g, g, out=P[:, 7])
+        P[:, 8] = g
+        np.multiply(ga, la, out=P[:, 9])
+        np.multiply(gb, la, out=P[:, 10])
+        P[:, 11] = la
+        np.multiply(g, la, out=P[:, 12])
+        np.multiply(la, la, out=P[:, 13])
+        np.multiply(dqc, qr, out=P[:, 14])
+        np.multiply(qc, dqr, out=P[:, 15])
+        np.multiply(qc, qr, out=P[:, 16])
+        np.multiply(g, tpa, out=P[:, 17])
+        P[:, 18] = 1.0
+        R = (P.reshape(-1, m) @ moments).reshape(active.size, 19, 6)
+        N = R[:, _N_PROD, _N_MOM]
+        b = R[:, _B_PROD, _B_MOM]
         dg = np.sqrt(np.einsum("nkk->nk", N))
         good = np.all(np.isfinite(N), axis=(1, 2)) & np.all(dg > 0, axis=1)
         dg[~good] = 1.0
@@ -357,32 +427,18 @@ def lsm(
         Ni = Nsi / (dg[:, :, None] * dg[:, None, :])
         dx = np.einsum("nij,nj->ni", Ni, b)
         # statistics of this linearisation (used if the point converges now)
-        vtv = np.einsum("nm,nm->n", la, la) - np.einsum("nk,nk->n", dx, b)
+        vtv = R[:, 13, 0] - np.einsum("nk,nk->n", dx, b)
         # noise-bias correction: minimise sum(l^2) - E, E = sigma^2 r1^2 sum q_s(s_i)
-        qc, dqc = _q_dq(s[..., 0])
-        qr, dqr = _q_dq(s[..., 1])
-        qs = qc * qr
-        dq_c = dqc * qr
-        dq_r = qc * dqr
-        sig2 = np.maximum(vtv, 0.0) / ((m - 8) * (q_ref[active] + ra1 * ra1 * qs.mean(axis=1)))
-        gradE = np.stack(
-            [
-                ra1 * ra1 * dq_c.sum(axis=1),
-                ra1 * ra1 * dq_r.sum(axis=1),
-                ra1 * ra1 * (dq_c @ u[:, 0]),
-                ra1 * ra1 * (dq_c @ u[:, 1]),
-                ra1 * ra1 * (dq_r @ u[:, 0]),
-                ra1 * ra1 * (dq_r @ u[:, 1]),
-                np.zeros(active.size),
-                2.0 * ra1 * qs.sum(axis=1),
-            ],
-            axis=1,
-        ) * (0.5 * sig2[:, None])
-        dx = dx + np.einsum("nij,nj->ni", Ni, gradE)
-        gm = g - g.mean(axis=1, keepdims=True)
-        tm = tpl[active] - tpl[active].mean(axis=1, keepdims=True)
-        cc = np.einsum("nm,nm->n", gm, tm) / np.sqrt(
-            np.einsum("nm,nm->n", gm, gm) * np.einsum("nm,nm->n", tm, tm) + 1e-300
+        sum_qs = R[:, 16, 0]
+        sig2 = np.maximum(vtv, 0.0) / ((m - 8) * (q_ref[active] + ra1 * ra1 * sum_qs / m))
+        gradE = np.zeros((active.size, 8))
+        gradE[:, 0:6] = R[:, [14, 15, 14, 14, 15, 15], [0, 0, 1, 2, 1, 2]] * (ra1 * ra1)[:, None]
+        gradE[:, 7] = 2.0 * ra1 * sum_qs
+        dx = dx + np.einsum("nij,nj->ni", Ni, gradE * (0.5 * sig2[:, None]))
+        sg, sgg, sgt = R[:, 8, 0], R[:, 7, 0], R[:, 17, 0]
+        st, stt = tpl_sum[active], tpl_sq[active]
+        cc = (sgt - sg * st / m) / np.sqrt(
+            np.maximum((sgg - sg * sg / m) * (stt - st * st / m), 1e-300)
         )
         # update
         dt = dx[:, :2]
@@ -406,7 +462,7 @@ def lsm(
         idx = active[done]
         converged[idx] = True
         s0sq[idx] = vtv[done] / (m - 8)
-        ninv[idx] = Ni[done]
+        nmat[idx] = N[done]
         corr[idx] = cc[done]
         active = active[(bad == 0) & ~done]
 
@@ -420,15 +476,11 @@ def lsm(
     reason[outside] = LsmReason.OUTSIDE
     ok &= ~(low | outside)
 
-    # covariance: s0^2 corrected for the interpolation's noise reduction (module docstring)
+    # covariance: s0^2 and N corrected for the interpolated noise (module docstring)
     cov = np.full((n, 2, 2), np.nan)
     ci = np.flatnonzero(converged)
     if ci.size:
-        sf = t[ci, None, :] + np.einsum("nab,mb->nma", A[ci], u)
-        q_s = (_q(sf[..., 0]) * _q(sf[..., 1])).mean(axis=1)
-        g1 = r1[ci]
-        sig2 = s0sq[ci] / (q_ref[ci] + g1 * g1 * q_s) * (1.0 + g1 * g1)
-        cov[ci] = sig2[:, None, None] * ninv[ci, :2, :2]
+        cov[ci] = _covariance(t[ci], A[ci], r1[ci], q_ref[ci], s0sq[ci], nmat[ci], u)
     res.xy = t
     res.affine = A
     res.gain = r1
@@ -437,6 +489,52 @@ def lsm(
     res.sigma = np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1]))
     res.ok = ok
     return res
+
+
+def _covariance(t, A, r1, q_ref, s0sq, N, u) -> np.ndarray:
+    """Covariance of the positions ``t`` (n, 2, 2), see the module docstring.
+
+    ``sigma^2 = s0^2 / (q_ref + r1^2 q_search)`` is the pixel noise; the normal
+    matrix ``N`` was built from noisy gradients and is inflated on average by
+    ``dN = sigma^2 sum_i B_i^T C_i B_i`` (``C_i`` the covariance of the
+    interpolated noise's derivatives and value ``(e_c', e_r', e)`` at sample
+    ``i``, from ``q``, ``q'`` and ``D``; ``B_i`` maps them to the Jacobian row);
+    ``Cov(t) = sigma^2 (1 + r1^2) [(N - dN)^-1]`` (position block), or with ``N``
+    itself where ``N - dN`` is not positive definite (noise swamping texture).
+    """
+    m = len(u)
+    uc, ur = u[:, 0], u[:, 1]
+    sc = t[:, 0:1] + A[:, 0, 0:1] * uc + A[:, 0, 1:2] * ur
+    sr = t[:, 1:2] + A[:, 1, 0:1] * uc + A[:, 1, 1:2] * ur
+    qc, dqc, dc = _q_dq(sc, with_d=True)
+    qr, dqr, dr = _q_dq(sr, with_d=True)
+    q_s = (qc * qr).mean(axis=1)
+    sig2 = s0sq / (q_ref + r1 * r1 * q_s)
+    # covariances of the noise of phi = (a, b, 1, g) (Jacobian columns = phi * lever):
+    # a = r1 e_c', b = r1 e_r', g = e; rows in the order of _PROD's products
+    P = np.zeros((len(t), 9, m))
+    P[:, 0] = dc * qr
+    P[:, 1] = 0.25 * dqc * dqr
+    P[:, 2] = qc * dr
+    P[:, 5] = 0.5 * dqc * qr
+    P[:, 6] = 0.5 * qc * dqr
+    P[:, 7] = qc * qr
+    moments = np.stack([np.ones(m), uc, ur, uc * uc, uc * ur, ur * ur], axis=1)
+    R = (P.reshape(-1, m) @ moments).reshape(len(t), 9, 6)
+    scale = np.ones((len(t), 9))
+    scale[:, [0, 1, 2]] = (r1 * r1)[:, None]
+    scale[:, [5, 6]] = r1[:, None]
+    R *= (scale * sig2[:, None])[:, :, None]
+    Rz = np.concatenate([R, np.zeros((len(t), 10, 6))], axis=1)  # row 18 ("1 * 1"): no noise
+    dN = Rz[:, _N_PROD, _N_MOM]
+    Nc = N - dN
+    d = np.sqrt(np.abs(np.einsum("nkk->nk", N)))
+    ev = np.linalg.eigvalsh(Nc / (d[:, :, None] * d[:, None, :]))
+    Nc[ev[:, 0] <= 1e-6] = N[ev[:, 0] <= 1e-6]
+    Ni = np.linalg.inv(Nc)
+    # first order sigma^2 (1 + r1^2) Nc, plus the noisy Jacobian times the residual noise
+    F = (sig2 * (1.0 + r1 * r1))[:, None, None] * Nc + s0sq[:, None, None] * dN
+    return np.matmul(np.matmul(Ni, F), Ni)[:, :2, :2]
 
 
 def track(
