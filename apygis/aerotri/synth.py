@@ -319,14 +319,19 @@ class _Scene:
         u -= 256.0 * np.floor(u * (1.0 / 256.0))
         v = y * c - x * s + off[1]
         v -= 256.0 * np.floor(v * (1.0 / 256.0))
-        u32, v32 = u.astype(np.float32), v.astype(np.float32)
-        shp = u.shape
-        if u32.ndim != 2:
-            u32, v32 = u32.reshape(1, -1), v32.reshape(1, -1)
         import cv2
 
-        out = cv2.remap(self.tile, u32, v32, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        return out.reshape(shp)
+        u32, v32 = u.astype(np.float32), v.astype(np.float32)
+        shp = u.shape
+        if u32.ndim == 2 and 0 < shp[1] < 30000 and shp[0] < 30000:
+            return cv2.remap(self.tile, u32, v32, cv2.INTER_LINEAR)
+        # cv2 takes 2-D maps of fewer than 32767 rows and columns: rows of 4096 points
+        m = u32.size
+        pad = -m % 4096
+        u32 = np.pad(u32.ravel(), (0, pad)).reshape(-1, 4096)
+        v32 = np.pad(v32.ravel(), (0, pad)).reshape(-1, 4096)
+        out = cv2.remap(self.tile, u32, v32, cv2.INTER_LINEAR)
+        return out.ravel()[:m].reshape(shp)
 
     def detail(self, x, y) -> np.ndarray:
         """The fine detail noise (unit amplitude, lattices of 1.5 .. 12 GSD)."""

@@ -277,3 +277,19 @@ def test_truth_pickles_for_parallel_rendering(block):
     assert np.array_equal(
         render_image(again, 101, noise=False), render_image(truth, 101, noise=False)
     )
+
+
+def test_texture_is_a_function_of_position(block):
+    """The same ground point gets the same texture value whatever the array's shape."""
+    _, truth = block
+    rng = np.random.default_rng(4)
+    e, n = truth.origin
+    X = e + rng.uniform(-1500, 1500, 50000)
+    Y = n + rng.uniform(-1200, 1200, 50000)
+    flat = truth.texture(X, Y)
+    assert flat.shape == (50000,)
+    assert np.array_equal(truth.texture(X.reshape(100, 500), Y.reshape(100, 500)).ravel(), flat)
+    assert np.array_equal(truth.texture(X[7:9], Y[7:9]), flat[7:9])
+    assert flat.min() >= 30.0
+    assert flat.max() <= 220.0
+    assert flat.std() > 20.0
