@@ -5,11 +5,14 @@ coordinates ``(x, y)`` in mm (x right, y up); the transform is a
 :class:`PixelTransform`. Residuals are ``v_i = T(p_i) - m_i`` (transformed
 measured mark minus calibrated position), reported in micrometres.
 
-Dihedral code ``d`` (0..7) of a scan: the linear part of its transform is
+Dihedral code ``d`` (0..7) of a scan: the scan shows the upright scan (code 0: a
+film scanned the usual way, photo x along the columns, y up) turned by
+``np.rot90(scan, d % 4)`` (90 degree steps counter-clockwise as displayed) and then,
+for ``d >= 4``, mirrored left-right (``np.fliplr``), the convention of
+:func:`apygis.aerotri.synth.dihedral`. The linear part of its transform is
 ``A = s R(theta) Q_d F`` with ``F = diag(1, -1)`` (rows point down), a small
-rotation ``R(theta)`` and scale ``s``, and ``Q_d = R(90 deg * (d mod 4))`` for
-``d < 4``, ``Q_d = R(90 deg * (d mod 4)) diag(-1, 1)`` (a mirror of x first) for
-``d >= 4``. A film scanned the usual way (emulsion, top up) has ``d = 0``.
+rotation ``R(theta)``, a scale ``s``, and ``Q_d = R(-90 deg * (d mod 4))``,
+times ``diag(-1, 1)`` on the right for ``d >= 4``.
 
 The automatic procedure (:func:`interior_orientation`):
 
@@ -63,7 +66,7 @@ def dihedral_matrix(code: int) -> np.ndarray:
     if not 0 <= int(code) <= 7:
         raise ValueError(f"dihedral code must be 0..7, got {code}")
     k = int(code) % 4
-    c, s = [1, 0, -1, 0][k], [0, 1, 0, -1][k]
+    c, s = [1, 0, -1, 0][k], [0, -1, 0, 1][k]  # cos, sin of -90 deg * k
     q = np.array([[c, -s], [s, c]], dtype=float)
     if code >= 4:
         q = q @ np.diag([-1.0, 1.0])
