@@ -744,10 +744,13 @@ def _scene_layout(spec: SynthSpec):
     rng = np.random.default_rng([spec.seed, 23])
     lake = None
     if spec.lake:
-        # at the outer von Gruber point of strip 1's model (1, 2), below image 2's centre
-        lake = (float(xs[1]), float(ys[0] + 0.28 * across), 0.1 * along, 0.07 * across)
+        # at the outer von Gruber point (photo y ~ 76 mm for film) of strip 1 at image 2:
+        # in the models (1, 2) and (2, 3)
+        lake = (float(xs[1]), float(ys[0] + 0.33 * across), 0.1 * along, 0.07 * across)
     mids = 0.5 * (xs[:-1] + xs[1:])
     xr = list(mids[::2]) + ([mids[-1]] if len(mids) % 2 == 0 else [])
+    if len(xr) < 2:  # two images: roads through both nadirs
+        xr = [xs[0], xs[-1]]
     yr = [ys[0] - 0.15 * across, *(0.5 * (ys[:-1] + ys[1:])), ys[-1] + 0.15 * across]
     if len(ys) == 1:
         yr = [ys[0] - 0.2 * across, ys[0] + 0.2 * across]
@@ -823,6 +826,9 @@ def _scan_base(spec: SynthSpec, rng) -> PixelTransform:
 def _build_truth(spec: SynthSpec) -> Truth:
     rng = np.random.default_rng([spec.seed, 41])
     layout, _, _, along, across = _layout(spec)
+    unknown = sorted(set(spec.rotated_scans) - {r[0] for r in layout})
+    if unknown:
+        raise FormatError(f"SynthSpec: rotated_scans names image {unknown[0]}, not in the block")
     lake, roads, crossings = _scene_layout(spec)
     e0, n0, z0 = spec.origin
     H = spec.flying_height

@@ -293,3 +293,26 @@ def test_texture_is_a_function_of_position(block):
     assert flat.min() >= 30.0
     assert flat.max() <= 220.0
     assert flat.std() > 20.0
+
+
+def test_bad_specs_are_refused():
+    from apygis.aerotri.synth import _build_truth
+    from apygis.errors import FormatError
+
+    with pytest.raises(FormatError, match="camera"):
+        SynthSpec(camera="lidar")
+    with pytest.raises(FormatError, match=r"0\.\.7"):
+        SynthSpec(rotated_scans={101: 8})
+    with pytest.raises(FormatError, match="image 999"):
+        _build_truth(SynthSpec(size_px=200, rotated_scans={999: 1}))
+
+
+def test_single_strip_of_two_has_control():
+    from apygis.aerotri.synth import _build_truth
+
+    truth = _build_truth(SynthSpec(strips=1, images_per_strip=2, size_px=200))
+    assert len(truth.control) >= 4
+    for c in truth.control:
+        g = [[c["X"], c["Y"], c["Z"]]]
+        assert truth.visible(101, g)[0]
+        assert truth.visible(102, g)[0]
