@@ -296,6 +296,98 @@ def _jacobian(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return J
 
 
+#: Gross-error test of the point tracking: a measurement whose Sampson distance to the
+#: epipolar line exceeds EPIPOLAR_K robust standard deviations (and EPIPOLAR_MIN_PX) is rejected.
+EPIPOLAR_K = 5.0
+EPIPOLAR_MIN_PX = 0.3
+
+
+def _epipolar_check(cam: Camera, mm_ref: np.ndarray, mm_search: np.ndarray, ok, pixel_mm: float):
+    """Measurements consistent with the pair's relative orientation (bool per measurement).
+
+    The rays ``u = (-(x - x0) / c, -(y - y0) / c, 1)`` (photo coordinates
+    corrected for the camera's radial distortion) of the reference and search
+    measurements satisfy ``u_s^T E u_r = 0`` for the pair's essential matrix
+    ``E``, found by RANSAC over the measurements that converged; a measurement
+    is rejected when its Sampson distance (converted to pixels) exceeds
+    ``max(EPIPOLAR_K * s, EPIPOLAR_MIN_PX)``, ``s`` the robust (MAD) standard
+    deviation of all distances. Fewer than 15 measurements are not tested.
+    Errors along the epipolar line are left to the multi-image checks.
+    """
+    import cv2
+
+    ok = np.asarray(ok, bool)
+    out = ok.copy()
+    if ok.sum() < 15:
+        return out
+    c = cam.focal_mm
+
+    def rays(mm):
+        v = cam.undistort(mm) - (cam.x0_mm, cam.y0_mm)
+        return -v / c
+
+    ur, us = rays(mm_ref), rays(mm_search)
+    scale = c / pixel_mm  # normalised units -> pixels
+    E, _ = cv2.findEssentialMat(
+        ur[ok], us[ok], focal=1.0, pp=(0.0, 0.0), method=cv2.RANSAC, prob=0.999,
+        threshold=1.0 / scale,
+    )  # fmt: skip
+    if E is None or E.shape != (3, 3):
+        return out
+    hr = np.column_stack([ur, np.ones(len(ur))])
+    hs = np.column_stack([us, np.ones(len(us))])
+    Eu = hr @ E.T  # E u_r
+    Etv = hs @ E  # E^T u_s
+    num = np.einsum("ij,ij->i", hs, Eu)
+    den = Eu[:, 0] ** 2 + Eu[:, 1] ** 2 + Etv[:, 0] ** 2 + Etv[:, 1] ** 2
+    d = np.abs(num) / np.sqrt(np.maximum(den, 1e-300)) * scale
+    robust = 1.4826 * np.median(d[ok])
+    return ok & (d <= max(EPIPOLAR_K * robust, EPIPOLAR_MIN_PX))
+
+
+#: Local test: a measurement farther than LOCAL_K robust standard deviations (and
+#: LOCAL_MIN_PX) from the affine map of its LOCAL_NEIGHBOURS nearest neighbours is rejected.
+LOCAL_K = 6.0
+LOCAL_MIN_PX = 1.0
+LOCAL_NEIGHBOURS = 10
+
+
+def _local_check(ref_xy: np.ndarray, xy: np.ndarray, ok) -> np.ndarray:
+    """Measurements that agree with their neighbours (bool per measurement).
+
+    For each measurement, the affine map reference -> search image of its
+    ``LOCAL_NEIGHBOURS`` nearest neighbours (in the reference image) predicts
+    its position; the terrain is smooth at the neighbours' spacing, so a
+    measurement far off the prediction (by more than ``LOCAL_K`` robust standard
+    deviations of all such residuals, and at least ``LOCAL_MIN_PX``) is a wrong
+    match, typically one along the epipolar line that the relative orientation
+    cannot see (repetitive texture).
+    """
+    from scipy.spatial import cKDTree
+
+    ok = np.asarray(ok, bool)
+    out = ok.copy()
+    idx = np.nonzero(ok)[0]
+    k = LOCAL_NEIGHBOURS
+    if len(idx) <= k + 3:
+        return out
+    r, q = ref_xy[idx], xy[idx]
+    _, nb = cKDTree(r).query(r, k + 1)
+    nb = nb[:, 1:]
+    centre = r[nb].mean(axis=1, keepdims=True)
+    X = np.concatenate([r[nb] - centre, np.ones((len(idx), k, 1))], axis=2)  # (m, k, 3)
+    Y = q[nb]  # (m, k, 2)
+    XtX = np.einsum("mki,mkj->mij", X, X) + 1e-9 * np.eye(3)
+    XtY = np.einsum("mki,mkj->mij", X, Y)
+    coef = np.linalg.solve(XtX, XtY)  # (m, 3, 2)
+    x0 = np.concatenate([r - centre[:, 0], np.ones((len(idx), 1))], axis=1)
+    pred = np.einsum("mi,mij->mj", x0, coef)
+    d = np.hypot(*(q - pred).T)
+    robust = 1.4826 * np.median(d)
+    out[idx] = d <= max(LOCAL_K * robust, LOCAL_MIN_PX)
+    return out
+
+
 def _spread_pick(xy: np.ndarray, n: int, cell: float) -> np.ndarray:
     """Indices of at most ``n`` points, one per grid cell first (spread over the model)."""
     if len(xy) <= n:
@@ -483,6 +575,7 @@ def _stage_pairs(
 
 
 def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, runner, progress):
+    cams = block.cameras()
     from apygis.aerotri.lsm import LsmReason
     from apygis.aerotri.tracks import link
 
@@ -572,8 +665,20 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
     obs: dict[int, list[tuple[int, float, float, float, float]]] = {
         t: [] for t in range(len(nodes))
     }
+    rejected["epipolar"] = 0
+    rejected["local"] = 0
     for (r_img, img), items in index.items():
         res = results[(r_img, img)]
+        ts = np.array([t for t, _ in items])
+        cam = cams[images[img].camera]
+        epi_ok = _epipolar_check(
+            cam,
+            transforms[r_img].to_mm(ref_xy0[ts]),
+            transforms[img].to_mm(np.where(np.isfinite(res["xy"]), res["xy"], 0.0)),
+            res["ok"],
+            transforms[img].pixel_mm,
+        )
+        local_ok = _local_check(ref_xy0[ts], res["xy"], res["ok"])
         for j, (t, pi) in enumerate(items):
             if not res["ok"][j]:
                 why = LsmReason(int(res["reason"][j])).name.lower().replace("_", " ")
@@ -582,6 +687,12 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
             approx = level_to_full(feats[img][pi][None, :], level)[0]
             if np.abs(res["xy"][j] - approx).max() > jump:
                 rejected["jumped"] += 1
+                continue
+            if not epi_ok[j]:
+                rejected["epipolar"] += 1
+                continue
+            if not local_ok[j]:
+                rejected["local"] += 1
                 continue
             obs[t].append((img, float(res["xy"][j][0]), float(res["xy"][j][1]),
                            float(res["sigma"][j]), float(res["corr"][j])))  # fmt: skip
