@@ -639,9 +639,27 @@ def _subset(r: LsmResult, sel) -> LsmResult:
 
 
 def _track_group(ref, search, level, rxy, sxy, A, half, corr_min, max_iter, tol_px) -> LsmResult:
-    """LSM of one group of points at one level, windows read around the group."""
+    """LSM of one group of points at one level, windows read around the group.
+
+    Templates reaching outside the reference image, and final search patches
+    reaching outside the search image, are ``OUTSIDE`` (never measured on the
+    source's edge padding)."""
     h_r, w_r = ref.shape(level)
     h_s, w_s = search.shape(level)
+    res = LsmResult.empty(len(rxy))
+    res.xy[:] = sxy
+    res.affine[:] = A
+    in_ref = (
+        (rxy[:, 0] >= half)
+        & (rxy[:, 1] >= half)
+        & (rxy[:, 0] <= w_r - 1 - half)
+        & (rxy[:, 1] <= h_r - 1 - half)
+        & np.all(np.isfinite(sxy), axis=1)
+    )
+    res.reason[~in_ref] = LsmReason.OUTSIDE
+    if not in_ref.any():
+        return res
+    rxy, sxy, A = rxy[in_ref], sxy[in_ref], A[in_ref]
     mref = half + 12  # spline prefilter edge effect: 0.268^10 ~ 2e-6
     c0 = int(np.floor(rxy[:, 0].min())) - mref
     r0 = int(np.floor(rxy[:, 1].min())) - mref
@@ -650,13 +668,12 @@ def _track_group(ref, search, level, rxy, sxy, A, half, corr_min, max_iter, tol_
     spline_r = SplineImage(ref.read(level, c0, r0, c1 - c0 + 1, r1 - r0 + 1), c0, r0)
     reach = float(np.abs(A).sum(axis=2).max()) * half
     ms = int(np.ceil(reach + half + 12))
-    sx = np.nan_to_num(sxy)
-    c0 = int(np.floor(sx[:, 0].min())) - ms
-    r0 = int(np.floor(sx[:, 1].min())) - ms
-    c1 = int(np.ceil(sx[:, 0].max())) + ms
-    r1 = int(np.ceil(sx[:, 1].max())) + ms
+    c0 = int(np.floor(sxy[:, 0].min())) - ms
+    r0 = int(np.floor(sxy[:, 1].min())) - ms
+    c1 = int(np.ceil(sxy[:, 0].max())) + ms
+    r1 = int(np.ceil(sxy[:, 1].max())) + ms
     spline_s = SplineImage(search.read(level, c0, r0, c1 - c0 + 1, r1 - r0 + 1), c0, r0)
-    res = lsm(
+    sub = lsm(
         spline_r,
         rxy,
         spline_s,
@@ -667,15 +684,8 @@ def _track_group(ref, search, level, rxy, sxy, A, half, corr_min, max_iter, tol_
         tol_px=tol_px,
         corr_min=corr_min,
     )
-    # the template and the final search patch must lie in the images (not in edge padding)
-    in_ref = (
-        (rxy[:, 0] >= half)
-        & (rxy[:, 1] >= half)
-        & (rxy[:, 0] <= w_r - 1 - half)
-        & (rxy[:, 1] <= h_r - 1 - half)
-    )
     corners = np.array([[-half, -half], [half, -half], [-half, half], [half, half]], float)
-    sc = res.xy[:, None, :] + np.einsum("nab,cb->nca", res.affine, corners)
+    sc = sub.xy[:, None, :] + np.einsum("nab,cb->nca", sub.affine, corners)
     with np.errstate(invalid="ignore"):
         in_s = np.all(
             (sc[..., 0] >= 0)
@@ -684,7 +694,8 @@ def _track_group(ref, search, level, rxy, sxy, A, half, corr_min, max_iter, tol_
             & (sc[..., 1] <= h_s - 1),
             axis=1,
         )
-    bad = res.ok & ~(in_ref & in_s)
-    res.reason[bad] = LsmReason.OUTSIDE
-    res.ok &= ~bad
+    bad = sub.ok & ~in_s
+    sub.reason[bad] = LsmReason.OUTSIDE
+    sub.ok &= ~bad
+    res.put(np.flatnonzero(in_ref), sub)
     return res

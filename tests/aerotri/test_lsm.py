@@ -123,7 +123,11 @@ def test_noisy_accuracy_matches_predicted_sigma(pair):
     rms = np.sqrt((e**2).mean())
     rms_pred = np.sqrt((r.sigma[r.ok] ** 2).mean())
     ratio = rms / rms_pred
-    print(f"\nLSM noise {sn} DN: RMS {rms:.4f} px, predicted {rms_pred:.4f}, ratio {ratio:.3f}")
+    med = np.median(np.hypot(*e.T))
+    print(
+        f"\nLSM noise {sn} DN: RMS {rms:.4f} px/axis, median radial {med:.4f} px, "
+        f"predicted RMS {rms_pred:.4f}, ratio {ratio:.3f}"
+    )
     # with ~1900 independent points the ratio's own scatter is ~1/sqrt(2 * 2n) ~ 1.2 %
     assert 0.8 < ratio < 1.3
     # unbiased (pixel locking removed): the mean error is within 4 sigma of its scatter
@@ -229,6 +233,11 @@ def test_track_three_levels():
     approx2 = full_to_level(true0, 2) + rng.uniform(-1, 1, (n, 2))
     r = track(rs, ss, p0, approx2, np.tile(M, (n, 1, 1)) * 1.01, start=2, tile=256)
     assert r.ok.mean() > 0.95
+    # a template reaching outside the reference image: never measured on edge padding
+    edge = np.array([[3.0, 400.0], [400.0, size - 2.0]])
+    re = track(rs, ss, edge, full_to_level(edge @ M.T + d, 2), M, start=2, tile=256)
+    assert not re.ok.any()
+    assert (re.reason == LsmReason.OUTSIDE).all()
     e = (r.xy - true0)[r.ok]
     rms = np.sqrt((e**2).mean())
     ratio = rms / np.sqrt((r.sigma[r.ok] ** 2).mean())
