@@ -20,14 +20,16 @@ The automatic procedure (:func:`interior_orientation`):
    the peaks of the normalised cross-correlation with the mark design's inner
    template (:func:`apygis.aerotri.fiducials.find_candidates`).
 2. For each dihedral code ``d``, a similarity with a small rotation
-   (|theta| <= 10 deg) is found from every pair of candidates and every ordered
-   pair of calibrated fiducials; the one that brings the most candidates within
-   2 mm of a fiducial wins and is refitted by least squares. The codes are
+   (|theta| <= 10 deg) is found from every pair of candidates (among the 16
+   best) and every ordered pair of calibrated fiducials; the one that brings the
+   most candidates within max(2 mm, 3 coarse pixels) of a fiducial wins and is
+   refitted by least squares. The codes are
    ranked by (fiducials explained, orientation mark seen at its predicted
    place, rms): the orientation mark makes a symmetric pattern's codes distinct.
 3. Every calibrated fiducial is refined at level 0 by a window read around its
    predicted place (:func:`apygis.aerotri.fiducials.refine_mark`): a mark not
-   found there is reported missing.
+   found there, or not wholly inside the scan, is reported missing; fewer
+   marks than a redundant fit needs raise :class:`OrientationError`.
 4. The model (affine by default) is fitted by least squares to the refined
    marks; residuals per fiducial, rms and max (um); ``flagged`` when the
    largest residual exceeds ``max_residual_um``.
