@@ -20,7 +20,10 @@ Gauss-Newton on the linearised observation equations::
 
 with ``(gc, gr)`` the gradient of the search image at ``s``. All points are
 solved at once (batched 8 x 8 normal equations); a point stops updating when the
-largest move of its window's corners in one step is below ``tol_px``.
+largest move of its window's corners in one step is below ``tol_px``, or when
+every geometric step is below 5 % of that parameter's own standard deviation
+(where noise rivals the texture, Gauss-Newton's ``N`` overestimates the cost's
+curvature and the iteration creeps; steps that small no longer matter).
 
 Images are sampled through their cubic B-spline interpolant
 (:class:`SplineImage`), values and analytic derivatives from the same spline,
@@ -65,8 +68,8 @@ and ``E[e e'] = q'(f) sigma^2 / 2``. Three consequences, all handled:
 
 Failure codes (:class:`LsmReason`): see its members. A point is ``ok`` only when
 converged, inside both windows, with a sane affine (singular values in
-``[0.5, 2]``), a positive gain and a normalised cross-correlation of template
-and resampled search patch of at least ``corr_min``.
+``[0.5, 2]``), a positive gain, a normalised cross-correlation of template
+and resampled search patch of at least ``corr_min`` and ``sigma <= sigma_max``.
 
 :func:`track` runs LSM coarse to fine through two image pyramids
 (:class:`~apygis.aerotri.imagery.ImageSource`), reading windows tile by tile.
@@ -97,6 +100,7 @@ class LsmReason(enum.IntEnum):
     GAIN = 5  #: gain ``r1`` not positive (contrast reversal)
     LOW_CORR = 6  #: correlation after convergence below ``corr_min``
     OUTSIDE = 7  #: template or search patch outside its window or image
+    IMPRECISE = 8  #: converged, but ``sigma`` above ``sigma_max`` (noise swamps texture)
 
 
 @dataclass
@@ -356,6 +360,7 @@ def lsm(
     max_iter: int = 15,
     tol_px: float = 0.002,
     corr_min: float = 0.75,
+    sigma_max: float = 0.5,
 ) -> LsmResult:
     """Least-squares matching of templates of ``ref`` at ``ref_xy`` into ``search``.
 
@@ -363,8 +368,9 @@ def lsm(
     search positions, pixel (col, row) of the level the images are at;
     ``affine0`` (n, 2, 2) approximate ``A`` (identity when None). The model and
     the covariance are in the module docstring; ``tol_px`` bounds the last
-    step's move of the window corners. Returns an :class:`LsmResult`; ``xy`` is
-    the search point homologous to ``ref_xy`` itself.
+    step's move of the window corners; ``sigma_max`` (px) the accepted
+    ``sigma``. Returns an :class:`LsmResult`; ``xy`` is the search point
+    homologous to ``ref_xy`` itself.
     """
     ref_xy = np.asarray(ref_xy, dtype=float).reshape(-1, 2)
     n = len(ref_xy)
@@ -478,7 +484,12 @@ def lsm(
         bad[np.hypot(*(t[active] - t0[active]).T) > half] = LsmReason.SHIFT
         bad[~(good & fin)] = LsmReason.SINGULAR
         reason[active[bad > 0]] = bad[bad > 0]
-        done = (bad == 0) & (move < tol_px)
+        # converged: the window corners moved < tol_px, or every geometric step is below
+        # 5 % of its own standard deviation (weak texture converges slowly in Gauss-Newton,
+        # whose N overestimates the curvature; further steps would not change the result)
+        sd = np.sqrt(np.abs(np.einsum("nkk->nk", Ni)[:, :6]) * (sig2 * (1.0 + ra1 * ra1))[:, None])
+        tiny = np.all(np.abs(dx[:, :6]) <= 0.05 * sd, axis=1)
+        done = (bad == 0) & ((move < tol_px) | tiny)
         idx = active[done]
         converged[idx] = True
         s0sq[idx] = vtv[done] / (m - 8)
@@ -507,7 +518,9 @@ def lsm(
     res.offset = r0
     res.cov = cov
     res.sigma = np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1]))
-    res.ok = ok
+    vague = ok & ~(res.sigma <= sigma_max)
+    reason[vague] = LsmReason.IMPRECISE
+    res.ok = ok & ~vague
     return res
 
 
