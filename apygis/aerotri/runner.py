@@ -40,13 +40,19 @@ class Runner:
             return self
         from distributed import Client, LocalCluster
 
+        # Dask's own INFO lines (scheduler, nanny, dashboard) are not the user's business
+        for name in ("distributed", "dask", "bokeh", "tornado"):
+            logging.getLogger(name).setLevel(logging.WARNING)
         if self.scheduler == "processes":
             n = self.workers or os.cpu_count() or 1
             self._cluster = LocalCluster(
                 n_workers=n,
                 threads_per_worker=1,
                 processes=True,
+                host="127.0.0.1",
                 dashboard_address=None,
+                worker_dashboard_address=None,
+                scheduler_kwargs={"dashboard": False},
                 silence_logs=logging.ERROR,
             )
             self._client = Client(self._cluster)

@@ -252,3 +252,86 @@ def at_info(block, as_json):
     with _open(block) as b:
         info = block_info(b)
     click.echo(json.dumps(info, indent=1) if as_json else info_text(info), nl=as_json)
+
+
+def _rotated(values) -> dict[int, int]:
+    out = {}
+    for v in values:
+        image, _, code = v.partition(":")
+        if not image.isdigit() or not code.isdigit() or int(code) > 7:
+            raise click.BadParameter(
+                f"{v!r}: expected IMAGE:CODE, CODE 0..7", param_hint="--rotated"
+            )
+        out[int(image)] = int(code)
+    return out
+
+
+@at.command("synth")
+@click.argument("folder", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--strips", type=click.IntRange(1, 50), default=3, show_default=True)
+@click.option("--images-per-strip", type=click.IntRange(2, 100), default=6, show_default=True)
+@click.option("--forward-overlap", type=click.FloatRange(0.0, 0.9), default=0.6, show_default=True)
+@click.option("--side-overlap", type=click.FloatRange(0.0, 0.9), default=0.3, show_default=True)
+@click.option("--cross-strips", type=click.IntRange(0, 10), default=0, show_default=True)
+@click.option(
+    "--size",
+    "size_px",
+    type=click.IntRange(64, 30000),
+    default=3000,
+    show_default=True,
+    help="Film: scan side in pixels (240 mm); digital: the sensor's long side.",
+)
+@click.option("--camera", type=click.Choice(["film", "digital"]), default="film", show_default=True)
+@click.option(
+    "--rotated",
+    multiple=True,
+    metavar="IMAGE:CODE",
+    help="Scan image IMAGE rotated/mirrored: CODE k (0-3) turns by k x 90 degrees, "
+    "k + 4 also mirrors.",
+)
+@click.option(
+    "--noise-dn",
+    type=click.FloatRange(0.0, 50.0),
+    default=2.0,
+    show_default=True,
+    help="Grain noise, standard deviation in grey values.",
+)
+@click.option("--no-lake", is_flag=True, help="No textureless water body.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--overwrite", is_flag=True, help="Write into a folder that is not empty.")
+@run_guarded
+def at_synth(folder, strips, images_per_strip, forward_overlap, side_overlap, cross_strips,
+             size_px, camera, rotated, noise_dn, no_lake, seed, overwrite):  # fmt: skip
+    """Render a synthetic block with its truth into FOLDER.
+
+    Writes the images, camera.toml, images.csv, control.csv (inputs of
+    'apygis at init'), dem.tif and truth.json (exterior and interior
+    orientations, scan transforms, control, DEM).
+    """
+    from apygis.aerotri.synth import SynthSpec, synth_block
+
+    if folder.exists() and any(folder.iterdir()) and not overwrite:
+        raise click.ClickException(
+            f"{folder}: the folder is not empty (--overwrite writes into it)"
+        )
+    spec = SynthSpec(
+        strips=strips,
+        images_per_strip=images_per_strip,
+        forward_overlap=forward_overlap,
+        side_overlap=side_overlap,
+        cross_strips=cross_strips,
+        size_px=size_px,
+        camera=camera,
+        rotated_scans=_rotated(rotated),
+        noise_dn=noise_dn,
+        lake=not no_lake,
+        seed=seed,
+    )
+    with _bar(f"rendering {folder}") as bar:
+        truth = synth_block(folder, spec, progress=_advance(bar))
+    n = strips * images_per_strip + cross_strips * images_per_strip
+    click.echo(f"{folder}: {n} {camera} images of {size_px} px, truth in {truth}")
+    click.echo(
+        f"next: apygis at init {folder}.block --camera {folder}/camera.toml "
+        f"--images {folder}/images.csv --control {folder}/control.csv"
+    )
