@@ -92,20 +92,26 @@ def test_export_and_info(matched):
     names = {row[0] for row in rows[1:]}
     assert len(names) == info["tie_points"]["points"]
     r = _run("at", "info", blk)
-    assert "tie points by multiplicity" in r.output and "2-fold" in r.output
+    assert "tie points by multiplicity" in r.output
+    assert "2-fold" in r.output
     for pic in ("plan.png", "match.png"):
         data = (out / pic).read_bytes()
-        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20000
+        assert data[:8] == b"\x89PNG\r\n\x1a\n"
+        assert len(data) > 20000
 
 
 def test_errors_are_one_line(tmp_path, tiny_block_dir):
     r = CliRunner().invoke(main, ["at", "info", str(tmp_path / "none.block")])
-    assert r.exit_code == 1 and "no such block" in r.output and "Traceback" not in r.output
+    assert r.exit_code == 1
+    assert "no such block" in r.output
+    assert "Traceback" not in r.output
     bad = tmp_path / "images.csv"
     bad.write_text("image,strip,file\n1,1,missing.tif\n")
-    r = CliRunner().invoke(main, ["at", "init", str(tmp_path / "b.block"), "--camera",
-                                  str(tiny_block_dir / "camera.toml"), "--images", str(bad)])  # fmt: skip
-    assert r.exit_code == 1 and "missing.tif not found" in r.output
+    cam = str(tiny_block_dir / "camera.toml")
+    args = ["at", "init", str(tmp_path / "b.block"), "--camera", cam, "--images", str(bad)]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 1
+    assert "missing.tif not found" in r.output
     assert not (tmp_path / "b.block").exists()
 
 

@@ -27,8 +27,11 @@ def test_image_list(tmp_path):
     a, b, c = read_image_list(p)
     assert (a.image, a.strip, a.X, a.Y, a.Z, a.heading_deg) == (101, 1, 10.5, 20.0, 1500.0, 90.0)
     assert a.path == tmp_path / "a.tif"
-    assert b.X is None and b.heading_deg is None and b.path == tmp_path / "sub" / "b.tif"
-    assert c.from_exif and c.X is None
+    assert b.X is None
+    assert b.heading_deg is None
+    assert b.path == tmp_path / "sub" / "b.tif"
+    assert c.from_exif
+    assert c.X is None
 
 
 @pytest.mark.parametrize(
