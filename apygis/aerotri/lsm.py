@@ -20,10 +20,11 @@ Gauss-Newton on the linearised observation equations::
 
 with ``(gc, gr)`` the gradient of the search image at ``s``. All points are
 solved at once (batched 8 x 8 normal equations); a point stops updating when the
-largest move of its window's corners in one step is below ``tol_px``, or when
-every geometric step is below 5 % of that parameter's own standard deviation
-(where noise rivals the texture, Gauss-Newton's ``N`` overestimates the cost's
-curvature and the iteration creeps; steps that small no longer matter).
+largest move of its window's corners in one step is below ``tol_px``, or below
+``10 tol_px`` with every geometric step below 5 % of that parameter's own
+standard deviation (where noise rivals the texture, Gauss-Newton's ``N``
+overestimates the cost's curvature and the iteration creeps; steps that small
+no longer matter).
 
 Images are sampled through their cubic B-spline interpolant
 (:class:`SplineImage`), values and analytic derivatives from the same spline,
@@ -484,11 +485,11 @@ def lsm(
         bad[np.hypot(*(t[active] - t0[active]).T) > half] = LsmReason.SHIFT
         bad[~(good & fin)] = LsmReason.SINGULAR
         reason[active[bad > 0]] = bad[bad > 0]
-        # converged: the window corners moved < tol_px, or every geometric step is below
-        # 5 % of its own standard deviation (weak texture converges slowly in Gauss-Newton,
-        # whose N overestimates the curvature; further steps would not change the result)
+        # converged: the window corners moved < tol_px, or < 10 tol_px with every geometric
+        # step below 5 % of its own standard deviation (weak texture converges slowly in
+        # Gauss-Newton, whose N overestimates the curvature; such steps change nothing)
         sd = np.sqrt(np.abs(np.einsum("nkk->nk", Ni)[:, :6]) * (sig2 * (1.0 + ra1 * ra1))[:, None])
-        tiny = np.all(np.abs(dx[:, :6]) <= 0.05 * sd, axis=1)
+        tiny = np.all(np.abs(dx[:, :6]) <= 0.05 * sd, axis=1) & (move < 10 * tol_px)
         done = (bad == 0) & ((move < tol_px) | tiny)
         idx = active[done]
         converged[idx] = True
