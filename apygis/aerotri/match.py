@@ -79,7 +79,7 @@ class MatchOptions:
     ncc_min: float = 0.7
     half: int = 7
     corr_min: float = 0.8
-    max_twofold_per_pair: int = 400
+    max_twofold_per_pair: int = 60
     scheduler: str | None = None
     workers: int | None = None
 
@@ -99,6 +99,7 @@ class MatchReport:
     flagged_interior: list[int] = field(default_factory=list)
     gaps: dict[tuple[int, int], list[int]] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
+    guided: dict[str, int] = field(default_factory=dict)
 
 
 # --- tasks (module level: they run in worker processes) ---------------------------------
@@ -388,6 +389,25 @@ def _local_check(ref_xy: np.ndarray, xy: np.ndarray, ok) -> np.ndarray:
     return out
 
 
+def _local_affines(tree, src: np.ndarray, dst: np.ndarray, at: np.ndarray):
+    """Local affine maps src -> dst at the points ``at`` from their nearest correspondences.
+
+    Returns ``(A (n, 2, 2), predicted (n, 2), reach (n,))``: the linear part, the
+    mapped points, and the distance to the farthest neighbour used (how far the
+    prediction extrapolates).
+    """
+    k = LOCAL_NEIGHBOURS
+    dist, nb = tree.query(at, k)
+    centre = src[nb].mean(axis=1, keepdims=True)
+    X = np.concatenate([src[nb] - centre, np.ones((len(at), k, 1))], axis=2)
+    XtX = np.einsum("mki,mkj->mij", X, X) + 1e-6 * np.eye(3)
+    coef = np.linalg.solve(XtX, np.einsum("mki,mkj->mij", X, dst[nb]))  # (n, 3, 2)
+    x0 = np.concatenate([at - centre[:, 0], np.ones((len(at), 1))], axis=1)
+    pred = np.einsum("mi,mij->mj", x0, coef)
+    A = np.transpose(coef[:, :2, :], (0, 2, 1))
+    return A, pred, dist[:, -1]
+
+
 def _spread_pick(xy: np.ndarray, n: int, cell: float) -> np.ndarray:
     """Indices of at most ``n`` points, one per grid cell first (spread over the model)."""
     if len(xy) <= n:
@@ -576,13 +596,16 @@ def _stage_pairs(
 
 def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, runner, progress):
     cams = block.cameras()
+    from scipy.spatial import cKDTree
+
     from apygis.aerotri.lsm import LsmReason
     from apygis.aerotri.tracks import link
 
     matches = block.pair_matches()
     tracks = link([(a, b, ia, ib) for a, b, ia, ib in matches if len(ia)])
     mult = tracks.multiplicity
-    # 2-fold points selectively: at most max_twofold_per_pair per pair, spread out
+    # two-fold tracks: a spread selection (guided measurement may add images to them; the
+    # final two-fold points are chosen after tracking)
     keep = mult >= 3
     two = np.nonzero(mult == 2)[0]
     if len(two):
@@ -593,7 +616,7 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
             sel = two[(ia == a) & (ib == b)]
             xy = feats[a][tracks.point[tracks.offsets[sel]]]
             h, w = PyramidSource(pyr[a]).shape(level)
-            pick = _spread_pick(xy, opt.max_twofold_per_pair, max(h, w) / 25)
+            pick = _spread_pick(xy, 5 * opt.max_twofold_per_pair, max(h, w) / 25)
             keep[sel[pick]] = True
     kept = np.nonzero(keep)[0]
     # reference image of each point: the one where it lies closest to the image centre
@@ -622,37 +645,63 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
     ref_xy0 = np.zeros((len(nodes), 2))
     for img, xy0 in runner.run(_task_refs, todo):
         ref_xy0[by_ref[int(img)]] = xy0
-    # homographies between images that share points (level L), for the affine approximations
-    pair_xy: dict[tuple[int, int], tuple[list, list]] = {}
+    # correspondences (level L) of every ordered image pair that shares linked points
+    corr: dict[tuple[int, int], tuple[list[int], list[int]]] = {}
+    for nd in nodes:
+        for i1, p1 in nd:
+            for i2, p2 in nd:
+                if i1 != i2:
+                    c1, c2 = corr.setdefault((i1, i2), ([], []))
+                    c1.append(p1)
+                    c2.append(p2)
+    corr_xy = {
+        k: (feats[k[0]][np.array(c1)], feats[k[1]][np.array(c2)]) for k, (c1, c2) in corr.items()
+    }
+    trees = {k: cKDTree(v[0]) for k, v in corr_xy.items() if len(v[0]) >= LOCAL_NEIGHBOURS}
+    neighbours: dict[int, set[int]] = {n: set() for n in images}
+    for p in bplan.pairs:
+        neighbours[p.a].add(p.b)
+        neighbours[p.b].add(p.a)
+    # measurements to make: the linked images of each point (block formation), and the
+    # neighbouring images of its reference image that should see it too (guided)
+    ref_L_all = full_to_level(ref_xy0, level)
+    items: dict[tuple[int, int], list[tuple[int, int]]] = {}  # (ref, img) -> [(t, node or -1)]
     for t, nd in enumerate(nodes):
-        r_img, r_pi = ref_of[t]
+        r_img = ref_of[t][0]
+        have = {img for img, _ in nd}
         for img, pi in nd:
             if img != r_img:
-                pa, pb = pair_xy.setdefault((r_img, img), ([], []))
-                pa.append(feats[r_img][r_pi])
-                pb.append(feats[img][pi])
+                items.setdefault((r_img, img), []).append((t, pi))
+        for img in neighbours[r_img] - have:
+            if (r_img, img) in trees:
+                items.setdefault((r_img, img), []).append((t, -1))
     tasks = []
-    index: dict[tuple[int, int], list[tuple[int, int]]] = {}
-    for t, nd in enumerate(nodes):
-        r_img, r_pi = ref_of[t]
-        for img, pi in nd:
-            if img != r_img:
-                index.setdefault((r_img, img), []).append((t, pi))
-    for (r_img, img), items in index.items():
-        ts = np.array([t for t, _ in items])
-        pis = np.array([p for _, p in items])
-        xa = np.asarray(pair_xy[(r_img, img)][0], float)
-        xb = np.asarray(pair_xy[(r_img, img)][1], float)
-        H = _homography_fit(xa, xb)
-        ref_L = full_to_level(ref_xy0[ts], level)
-        if H is not None:
-            A = _jacobian(H, ref_L)
-            start = feats[img][pis] + np.einsum(
-                "nij,nj->ni", A, ref_L - feats[r_img][[ref_of[t][1] for t in ts]]
-            )
+    index: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    for (r_img, img), its in items.items():
+        ts = np.array([t for t, _ in its])
+        pis = np.array([p for _, p in its])
+        ref_L = ref_L_all[ts]
+        h, w = images[img].height / 2**level, images[img].width / 2**level
+        if (r_img, img) in trees:
+            src, dst = corr_xy[(r_img, img)]
+            A, pred, reach = _local_affines(trees[(r_img, img)], src, dst, ref_L)
         else:
-            A = np.tile(np.eye(2), (len(ts), 1, 1))
-            start = feats[img][pis] + (ref_L - feats[r_img][[ref_of[t][1] for t in ts]])
+            A, pred, reach = np.tile(np.eye(2), (len(ts), 1, 1)), ref_L.copy(), np.zeros(len(ts))
+        fbm = pis >= 0
+        start = pred.copy()
+        ref_feat = feats[r_img][[ref_of[t][1] for t in ts]]
+        start[fbm] = feats[img][pis[fbm]] + np.einsum(
+            "nij,nj->ni", A[fbm], ref_L[fbm] - ref_feat[fbm]
+        )
+        # a guided point must lie inside the other image and near known correspondences
+        margin = opt.half + 3
+        inside = (start[:, 0] >= margin) & (start[:, 0] <= w - 1 - margin)
+        inside &= (start[:, 1] >= margin) & (start[:, 1] <= h - 1 - margin)
+        keep = fbm | (inside & (reach <= max(h, w) / 6))
+        if not keep.any():
+            continue
+        ts, pis, start, A = ts[keep], pis[keep], start[keep], A[keep]
+        index[(r_img, img)] = (ts, pis, start)
         tasks.append(((r_img, img), (pyr[r_img], pyr[img], ref_xy0[ts], start, A, level, opt)))
     results: dict[tuple[int, int], dict] = {}
     for k, (key, res) in enumerate(runner.run(_task_track, tasks), 1):
@@ -661,41 +710,55 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
             progress(k, len(tasks))
     # assemble observations
     jump = 2.0**level * 2.0
-    rejected = {"jumped": 0, "fewer than 2 images": 0}
+    rejected = {"jumped": 0, "epipolar": 0, "local": 0, "fewer than 2 images": 0}
+    guided = {"tried": 0, "measured": 0}
     obs: dict[int, list[tuple[int, float, float, float, float]]] = {
         t: [] for t in range(len(nodes))
     }
-    rejected["epipolar"] = 0
-    rejected["local"] = 0
-    for (r_img, img), items in index.items():
+    for (r_img, img), (ts, pis, start) in index.items():
         res = results[(r_img, img)]
-        ts = np.array([t for t, _ in items])
         cam = cams[images[img].camera]
+        xy = np.where(np.isfinite(res["xy"]), res["xy"], 0.0)
         epi_ok = _epipolar_check(
             cam,
             transforms[r_img].to_mm(ref_xy0[ts]),
-            transforms[img].to_mm(np.where(np.isfinite(res["xy"]), res["xy"], 0.0)),
+            transforms[img].to_mm(xy),
             res["ok"],
             transforms[img].pixel_mm,
         )
         local_ok = _local_check(ref_xy0[ts], res["xy"], res["ok"])
-        for j, (t, pi) in enumerate(items):
+        near = np.abs(xy - level_to_full(start, level)).max(axis=1) <= jump
+        for j, t in enumerate(ts):
+            is_guided = pis[j] < 0
+            guided["tried"] += int(is_guided)
+            why = ""
             if not res["ok"][j]:
-                why = LsmReason(int(res["reason"][j])).name.lower().replace("_", " ")
-                rejected[f"lsm: {why}"] = rejected.get(f"lsm: {why}", 0) + 1
+                why = "lsm: " + LsmReason(int(res["reason"][j])).name.lower().replace("_", " ")
+            elif not near[j]:
+                why = "jumped"
+            elif not epi_ok[j]:
+                why = "epipolar"
+            elif not local_ok[j]:
+                why = "local"
+            if why:
+                if not is_guided:
+                    rejected[why] = rejected.get(why, 0) + 1
                 continue
-            approx = level_to_full(feats[img][pi][None, :], level)[0]
-            if np.abs(res["xy"][j] - approx).max() > jump:
-                rejected["jumped"] += 1
-                continue
-            if not epi_ok[j]:
-                rejected["epipolar"] += 1
-                continue
-            if not local_ok[j]:
-                rejected["local"] += 1
-                continue
-            obs[t].append((img, float(res["xy"][j][0]), float(res["xy"][j][1]),
-                           float(res["sigma"][j]), float(res["corr"][j])))  # fmt: skip
+            guided["measured"] += int(is_guided)
+            obs[int(t)].append((img, float(xy[j][0]), float(xy[j][1]),
+                                float(res["sigma"][j]), float(res["corr"][j])))  # fmt: skip
+    # two-fold points selectively: at most max_twofold_per_pair per model, spread over it
+    twofold: dict[tuple[int, int], list[int]] = {}
+    for t in range(len(nodes)):
+        if len(obs[t]) == 1:
+            twofold.setdefault((ref_of[t][0], obs[t][0][0]), []).append(t)
+    for (r_img, _), ts_two in twofold.items():
+        cell = max(images[r_img].width, images[r_img].height) / 20
+        chosen = set(_spread_pick(ref_xy0[ts_two], opt.max_twofold_per_pair, cell).tolist())
+        for k, t in enumerate(ts_two):
+            if k not in chosen:
+                obs[t] = []
+                rejected["two-fold not needed"] = rejected.get("two-fold not needed", 0) + 1
     good = [t for t in range(len(nodes)) if len(obs[t]) >= 1]
     rejected["fewer than 2 images"] = len(nodes) - len(good)
     names = block.tie_names(len(good))
@@ -730,6 +793,7 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
         observations=len(rows),
         multiplicity=dict(sorted(mult_table.items())),
         rejected=rejected,
+        guided=guided,
     )
 
 
