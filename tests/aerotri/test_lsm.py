@@ -154,22 +154,24 @@ def test_radiometric_gain_and_offset(pair):
 def test_convergence_radius(pair):
     ref, search = pair
     rng = np.random.default_rng(5)
-    n = 400
+    n = 3000
     p = rng.uniform(40, 600, size=(n, 2))
     true = p @ M_TRUE.T + D_TRUE
     ang = rng.uniform(0, 2 * np.pi, n)
     sr, ss = SplineImage(ref), SplineImage(search)
     off2 = 2.0 * np.c_[np.cos(ang), np.sin(ang)]
-    r = lsm(sr, p, ss, true + off2)
+    r = lsm(sr, p, ss, true + off2, M_TRUE)
     assert r.ok.mean() > 0.97
     assert np.abs(r.xy - true)[r.ok].max() < 0.005
     off6 = 6.0 * np.c_[np.cos(ang), np.sin(ang)]
-    r = lsm(sr, p, ss, true + off6, half=7)
+    r = lsm(sr, p, ss, true + off6, M_TRUE, half=7)
     err = np.hypot(*(r.xy - true).T)
-    # never a wrong "ok": every accepted point is right
+    # never a wrong "ok": every accepted point is right (without the affine_max check ~0.6 %
+    # of these points fit a wrong place at correlation 0.76 - 0.94 with a distorted A)
     assert (err[r.ok] < 0.01).all()
     assert (~r.ok).sum() > 0.2 * n  # 6 px is beyond the radius for most points
-    assert set(np.unique(r.reason[~r.ok])) <= {int(x) for x in LsmReason if x != LsmReason.OK}
+    assert (r.reason[~r.ok] != LsmReason.OK).all()
+    assert (r.reason[r.ok] == LsmReason.OK).all()
 
 
 def test_failures_flagged():
