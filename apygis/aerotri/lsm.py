@@ -81,6 +81,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 from functools import cache
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
@@ -379,6 +380,47 @@ def lsm(
     homologous to ``ref_xy`` itself.
     """
     ref_xy = np.asarray(ref_xy, dtype=float).reshape(-1, 2)
+    n = len(ref_xy)
+    search_xy0 = np.asarray(search_xy0, dtype=float).reshape(n, 2)
+    if affine0 is not None:
+        affine0 = np.array(np.broadcast_to(np.asarray(affine0, dtype=float), (n, 2, 2)))
+    kw: dict[str, Any] = dict(
+        half=half,
+        max_iter=max_iter,
+        tol_px=tol_px,
+        corr_min=corr_min,
+        sigma_max=sigma_max,
+        affine_max=affine_max,
+    )
+    if n <= _BATCH:
+        return _lsm(ref, ref_xy, search, search_xy0, affine0, **kw)
+    # batches bound the memory (~35 MB of window sums per 1024 points at half = 7)
+    out = LsmResult.empty(n)
+    for s in range(0, n, _BATCH):
+        sl = np.arange(s, min(n, s + _BATCH))
+        a0 = None if affine0 is None else affine0[sl]
+        out.put(sl, _lsm(ref, ref_xy[sl], search, search_xy0[sl], a0, **kw))
+    return out
+
+
+_BATCH = 1024
+
+
+def _lsm(
+    ref: SplineImage,
+    ref_xy: np.ndarray,
+    search: SplineImage,
+    search_xy0: np.ndarray,
+    affine0,
+    *,
+    half: int,
+    max_iter: int,
+    tol_px: float,
+    corr_min: float,
+    sigma_max: float,
+    affine_max: float,
+) -> LsmResult:
+    """:func:`lsm` for one batch of points."""
     n = len(ref_xy)
     t = np.asarray(search_xy0, dtype=float).reshape(n, 2).copy()
     t0 = t.copy()
