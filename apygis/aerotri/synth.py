@@ -323,6 +323,8 @@ class _Scene:
 
         u32, v32 = u.astype(np.float32), v.astype(np.float32)
         shp = u.shape
+        if u32.size == 0:
+            return u32
         if u32.ndim == 2 and 0 < shp[1] < 30000 and shp[0] < 30000:
             return cv2.remap(self.tile, u32, v32, cv2.INTER_LINEAR)
         # cv2 takes 2-D maps of fewer than 32767 rows and columns: rows of 4096 points
@@ -361,23 +363,9 @@ class _Scene:
         x = np.asarray(x, dtype=float)
         y = np.asarray(y, dtype=float)
         sp = self.spacing
-        # parcels: rows of height row_h along the direction (ca, sa), sheared columns
-        u = x * self.ca + y * self.sa
-        v = y * self.ca - x * self.sa
-        row = np.floor(v / self.row_h)
-        hr = _hash(row, 0, 1)
-        width = 70.0 + 200.0 * hr
-        u2 = u + 977.0 * hr
-        col = np.floor(u2 / width)
-        h1 = _hash(col, row, 2)
+        u, v, h1, edge, forest = self._parcels(x, y)
         h2 = np.modf(h1 * 256.0)[0]  # further 24 and 16 bits of the same hash
         h3 = np.modf(h1 * 65536.0)[0]
-        fv = v - row * self.row_h
-        fu = u2 - col * width
-        edge = np.minimum(np.minimum(fv, self.row_h - fv), np.minimum(fu, width - fu))
-        zone_f = self._tile(x, y, 350.0, *self.zone[0])
-        zone_v = self._tile(x, y, 300.0, *self.zone[1])
-        forest = (h1 < 0.08) | ((zone_f > 0.7) & (h1 < 0.7))
         meadow = ~forest & (h1 < 0.40)
         # fields: grey level, stripes along or across the parcel
         g = 85.0 + 95.0 * h2
@@ -402,12 +390,9 @@ class _Scene:
         g = np.where(hedge & ~forest, 62.0, g)
         # roads (with a dark shoulder) and buildings
         dr = self.road_distance(x, y)
-        village = (zone_v > 0.75) | ((dr > 4.0) & (dr < 40.0))
-        bi = np.flatnonzero(village & (dr > 1.0) & ~forest)
+        bi = np.flatnonzero(dr > 1.0)
         if bi.size:
-            gb, nb = self._buildings(
-                u.ravel()[bi], v.ravel()[bi], zone_v.ravel()[bi], g.ravel()[bi]
-            )
+            gb, nb = self._buildings(u.ravel()[bi], v.ravel()[bi], g.ravel()[bi])
             g.ravel()[bi] = gb
             namp.ravel()[bi] = np.where(nb, 2.0, namp.ravel()[bi])
         g = np.where(dr < 0.0, 138.0, np.where(dr < 1.0, 58.0, g))
@@ -440,18 +425,40 @@ class _Scene:
         bright = 0.75 + 0.35 * np.modf(h * 16.0)[0]
         return np.where(k < 1.0, 40.0 + 120.0 * bright * (1.0 - k) * (0.8 + 0.2 * lit), 36.0)
 
-    def _buildings(self, u, v, zone, ground):
+    def _parcels(self, x, y):
+        """Parcel coordinates ``(u, v)``, the parcel's hash, the distance to its edge and
+        whether it is forest. Parcels: rows of height ``row_h`` across the direction
+        ``(ca, sa)``, each row cut into parcels of its own width (70..270 m), shifted."""
+        u = x * self.ca + y * self.sa
+        v = y * self.ca - x * self.sa
+        row = np.floor(v / self.row_h)
+        hr = _hash(row, 0, 1)
+        width = 70.0 + 200.0 * hr
+        u2 = u + 977.0 * hr
+        col = np.floor(u2 / width)
+        h1 = _hash(col, row, 2)
+        fv = v - row * self.row_h
+        fu = u2 - col * width
+        edge = np.minimum(np.minimum(fv, self.row_h - fv), np.minimum(fu, width - fu))
+        zone_f = self._tile(x, y, 350.0, *self.zone[0])
+        forest = (h1 < 0.08) | ((zone_f > 0.7) & (h1 < 0.7))
+        return u, v, h1, edge, forest
+
+    def _buildings(self, u, v, ground):
         """Ground with buildings at parcel coordinates ``(u, v)``; and the roof mask.
 
-        One building per 30 m cell of the parcel grid (probability 0.75 in villages,
-        0.25 elsewhere), half sizes 4..9 x 3..6 m, the roof's ``v > 0`` half bright,
-        its shadow the roof shifted by (3, -3) m (ground darkened to 40 %)."""
+        One building per 30 m cell of the parcel grid, with probability 0.75 where
+        the village noise at the cell's building centre exceeds 0.75, 0.25 within 4..40 m
+        of a road, none in forest, near a road (closer than its half sizes' sum + 2 m)
+        or the lake; half sizes 4..9 x 3..6 m, the roof's ``v > 0`` half bright, its
+        shadow the roof shifted by (3, -3) m (ground darkened to 40 %). Every decision
+        is taken at the building's centre, so buildings are never cut."""
         cell, s = 30.0, 3.0
         bi, bj = np.floor(u / cell), np.floor(v / cell)
         h = _hash(bi, bj, 20)
         out = ground.copy()
         roof = np.zeros(u.shape, bool)
-        k = np.flatnonzero(h < np.where(zone > 0.75, 0.75, 0.25))
+        k = np.flatnonzero(h < 0.75)
         if not k.size:
             return out, roof
         bi, bj, h = bi[k], bj[k], h[k]
@@ -464,11 +471,15 @@ class _Scene:
         hy = 3.0 + 3.0 * np.modf(h4 * 256.0)[0]
         du, dv = u[k] - cu, v[k] - cv
         near = (np.abs(du - 0.5 * s) < hx + 0.5 * s) & (np.abs(dv + 0.5 * s) < hy + 0.5 * s)
-        k, cu, cv, hx, hy, du, dv = (a[near] for a in (k, cu, cv, hx, hy, du, dv))
-        # the centre must be off the roads and the lake
+        k, h, cu, cv, hx, hy, du, dv = (a[near] for a in (k, h, cu, cv, hx, hy, du, dv))
+        # decisions at the building's centre
         xc = cu * self.ca - cv * self.sa
         yc = cu * self.sa + cv * self.ca
-        ok = (self.road_distance(xc, yc) > hx + hy + 2.0) & ~self.in_lake(xc, yc, 1.3)
+        dr = self.road_distance(xc, yc)
+        village = self._tile(xc, yc, 300.0, *self.zone[1]) > 0.75
+        ok = (dr > hx + hy + 2.0) & ~self.in_lake(xc, yc, 1.3)
+        ok &= village | ((h < 0.25) & (dr < 40.0))
+        ok &= ~self._parcels(xc, yc)[4]
         r = ok & (np.abs(du) < hx) & (np.abs(dv) < hy)
         sh = ok & ~r & (np.abs(du - s) < hx) & (np.abs(dv + s) < hy)
         out[k] = np.where(sh, 0.4 * out[k], np.where(r, np.where(dv > 0.0, 205.0, 158.0), out[k]))
