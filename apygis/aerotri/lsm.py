@@ -369,7 +369,10 @@ def lsm(
 
     ``ref_xy`` (n, 2) reference points and ``search_xy0`` (n, 2) approximate
     search positions, pixel (col, row) of the level the images are at;
-    ``affine0`` (n, 2, 2) approximate ``A`` (identity when None). The model and
+    ``affine0`` (n, 2, 2) approximate ``A`` (identity when None; it must hold
+    the pair's rotation, e.g. ``-I`` between strips flown in opposite
+    directions: the convergence radius is about a third of ``half`` and
+    ``A`` may move only ``affine_max`` from it). The model and
     the covariance are in the module docstring; ``tol_px`` bounds the last
     step's move of the window corners; ``sigma_max`` (px) the accepted
     ``sigma``; ``affine_max`` the accepted departure of ``A`` from ``affine0``,
