@@ -316,3 +316,18 @@ def test_single_strip_of_two_has_control():
         g = [[c["X"], c["Y"], c["Z"]]]
         assert truth.visible(101, g)[0]
         assert truth.visible(102, g)[0]
+
+
+@pytest.mark.parametrize("n", [101, 203])
+def test_fiducial_marks_lie_where_the_scan_transform_says(block, n):
+    """Each 8 x 8 mm mark is a dark square (DN 15) with a small bright disk and ring:
+    its median over 9 x 9 pixels (5.4 mm at 0.6 mm per pixel) stays dark (< 60, well
+    below any ground texture's 30..220 mean) and its maximum is bright (the disk and ring
+    cover whole pixels' fractions of 235 DN)."""
+    path, truth = block
+    a = _read(path.parent / f"img_{n}.tif").astype(float)
+    for xy in truth.camera.fiducials.values():
+        c, r = np.rint(truth.scan[n].to_px([xy])[0]).astype(int)
+        win = a[r - 4 : r + 5, c - 4 : c + 5]
+        assert np.median(win) < 60
+        assert win.max() > 120
