@@ -371,8 +371,9 @@ def lsm(
     search positions, pixel (col, row) of the level the images are at;
     ``affine0`` (n, 2, 2) approximate ``A`` (identity when None; it must hold
     the pair's rotation, e.g. ``-I`` between strips flown in opposite
-    directions: the convergence radius is about a third of ``half`` and
-    ``A`` may move only ``affine_max`` from it). The model and
+    directions: ``A`` may move only ``affine_max`` from it). Convergence
+    radius: all points from 2 px off, 99 % from 3, 79 % from 4, 15 % from 6
+    (``half = 7``, texture of 1.8 px scale; never a wrong ok in these trials). The model and
     the covariance are in the module docstring; ``tol_px`` bounds the last
     step's move of the window corners; ``sigma_max`` (px) the accepted
     ``sigma``; ``affine_max`` the accepted departure of ``A`` from ``affine0``,
