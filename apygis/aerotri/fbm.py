@@ -341,7 +341,7 @@ def _sampson(E, ua, ub):
     return num / np.where(den > 0, den, 1e-300)
 
 
-def _refine_essential(R0, t0, ua, ub):
+def refine_essential(R0, t0, ua, ub):
     """Least-squares ``(R, t)`` (5 parameters) minimising the Sampson distances."""
     t0 = t0 / np.linalg.norm(t0)
     e1 = np.cross(t0, [1.0, 0.0, 0.0] if abs(t0[0]) < 0.9 else [0.0, 1.0, 0.0])
@@ -380,7 +380,7 @@ def _strip_model(xy_a, xy_b, photo_a, photo_b, focal_mm, threshold_px):
     _, R, t, _ = cv2.recoverPose(E, ua[inl, :2], ub[inl, :2], np.eye(3))
     R0, t0 = np.asarray(R, dtype=float), np.asarray(t, dtype=float).ravel()
     for _ in range(3):
-        E = _refine_essential(R0, t0, ua[inl], ub[inl])
+        E = refine_essential(R0, t0, ua[inl], ub[inl])
         e = _sampson(E, ua, ub) / unit
         sigma = math.sqrt(float(np.mean(e[inl] ** 2)))
         new = np.abs(e) <= max(3.0 * sigma, 0.25)

@@ -303,47 +303,104 @@ EPIPOLAR_K = 5.0
 EPIPOLAR_MIN_PX = 0.3
 
 
-def _epipolar_check(cam: Camera, mm_ref: np.ndarray, mm_search: np.ndarray, ok, pixel_mm: float):
-    """Measurements consistent with the pair's relative orientation (bool per measurement).
+def _refined(E: np.ndarray, ur: np.ndarray, us: np.ndarray, threshold: float) -> np.ndarray:
+    """``E`` refined by least squares (5 parameters, Sampson distances) over the rays within
+    ``threshold`` (normalised units) of their epipolar lines."""
+    import cv2
+
+    from apygis.aerotri.fbm import refine_essential
+
+    line = ur @ E.T
+    d = np.abs(np.einsum("ij,ij->i", us, line)) / np.hypot(line[:, 0], line[:, 1])
+    inl = d <= threshold
+    if inl.sum() < 8:
+        return E
+    _, R, t, _ = cv2.recoverPose(E, ur[inl, :2], us[inl, :2], np.eye(3))
+    return refine_essential(R, t.ravel(), ur[inl], us[inl])
+
+
+#: The median of a chi-square variable with one degree of freedom.
+_CHI2_1_MEDIAN = 0.4549364231195724
+
+
+def _extra_variance(z: np.ndarray, var: np.ndarray) -> float:
+    """The variance ``s2`` to add to ``var`` so that ``median(z^2 / (var + s2))`` is the
+    median of a chi-square with one degree of freedom (0 if the spread is not larger)."""
+    r = z * z
+    if np.median(r / var) <= _CHI2_1_MEDIAN:
+        return 0.0
+    lo, hi = 0.0, float(np.max(r))
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if np.median(r / (var + mid)) > _CHI2_1_MEDIAN:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def _epipolar_check(
+    cam: Camera, mm_ref: np.ndarray, mm_search: np.ndarray, ok, pixel_mm: float, sigma
+) -> tuple[np.ndarray, float]:
+    """The measurements consistent with the pair's relative orientation, and the variance
+    (px^2) that the measurements' own sigmas lack.
 
     The rays ``u = (-(x - x0) / c, -(y - y0) / c, 1)`` (photo coordinates
     corrected for the camera's radial distortion) of the reference and search
     measurements satisfy ``u_s^T E u_r = 0`` for the pair's essential matrix
-    ``E``, found by RANSAC over the measurements that converged; a measurement
-    is rejected when its Sampson distance (converted to pixels) exceeds
-    ``max(EPIPOLAR_K * s, EPIPOLAR_MIN_PX)``, ``s`` the robust (MAD) standard
-    deviation of all distances. Fewer than 15 measurements are not tested.
-    Errors along the epipolar line are left to the multi-image checks.
+    ``E``, found by RANSAC (five-point) over the measurements that converged and
+    refined by least squares on its inliers (five parameters, Sampson distances;
+    a linear eight-point fit would be degenerate for the nearly flat scenes of
+    aerial photos). The signed distance ``z`` of each search
+    measurement from its epipolar line (pixels) is the part of its error that the
+    relative orientation sees. A measurement is rejected when
+    ``|z| > max(EPIPOLAR_K * s, EPIPOLAR_MIN_PX)``, ``s`` the robust (MAD)
+    standard deviation of ``z``. Errors along the epipolar line are left to the
+    local test.
+
+    Variance component: if the accepted ``z`` spread more than the LSM sigmas
+    say (image noise is not the only error: resampling, texture the affine model
+    does not follow), the extra variance ``s2`` solves
+    ``median(z^2 / (sigma^2 + s2)) = chi2_1 median``, and the caller reports
+    ``sqrt(sigma^2 + s2)``: precisions that match the errors. Fewer than 15
+    measurements are neither tested nor used for ``s2``.
     """
     import cv2
 
     ok = np.asarray(ok, bool)
     out = ok.copy()
     if ok.sum() < 15:
-        return out
+        return out, 0.0
     c = cam.focal_mm
 
     def rays(mm):
-        v = cam.undistort(mm) - (cam.x0_mm, cam.y0_mm)
-        return -v / c
+        v = (cam.undistort(mm) - (cam.x0_mm, cam.y0_mm)) / -c
+        return np.column_stack([v, np.ones(len(v))])
 
     ur, us = rays(mm_ref), rays(mm_search)
     scale = c / pixel_mm  # normalised units -> pixels
     E, _ = cv2.findEssentialMat(
-        ur[ok], us[ok], focal=1.0, pp=(0.0, 0.0), method=cv2.RANSAC, prob=0.999,
+        ur[ok, :2], us[ok, :2], focal=1.0, pp=(0.0, 0.0), method=cv2.RANSAC, prob=0.999,
         threshold=1.0 / scale,
     )  # fmt: skip
     if E is None or E.shape != (3, 3):
-        return out
-    hr = np.column_stack([ur, np.ones(len(ur))])
-    hs = np.column_stack([us, np.ones(len(us))])
-    Eu = hr @ E.T  # E u_r
-    Etv = hs @ E  # E^T u_s
-    num = np.einsum("ij,ij->i", hs, Eu)
-    den = Eu[:, 0] ** 2 + Eu[:, 1] ** 2 + Etv[:, 0] ** 2 + Etv[:, 1] ** 2
-    d = np.abs(num) / np.sqrt(np.maximum(den, 1e-300)) * scale
-    robust = 1.4826 * np.median(d[ok])
-    return ok & (d <= max(EPIPOLAR_K * robust, EPIPOLAR_MIN_PX))
+        return out, 0.0
+    E = _refined(E, ur[ok], us[ok], 3.0 / scale)
+
+    def distances(E):
+        line = ur @ E.T  # epipolar lines E u_r in the search image
+        return np.einsum("ij,ij->i", us, line) / np.hypot(line[:, 0], line[:, 1]) * scale
+
+    z = distances(E)
+    robust = 1.4826 * np.median(np.abs(z[ok] - np.median(z[ok])))
+    out = ok & (np.abs(z) <= max(EPIPOLAR_K * robust, EPIPOLAR_MIN_PX))
+    if out.sum() < 15:
+        return out, 0.0
+    var = np.asarray(sigma, float)[out] ** 2
+    good = np.isfinite(var) & (var > 0)
+    if good.sum() < 15:
+        return out, 0.0
+    return out, _extra_variance(z[out][good], var[good])
 
 
 #: Local test: a measurement farther than LOCAL_K robust standard deviations (and
@@ -719,13 +776,15 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
         res = results[(r_img, img)]
         cam = cams[images[img].camera]
         xy = np.where(np.isfinite(res["xy"]), res["xy"], 0.0)
-        epi_ok = _epipolar_check(
+        epi_ok, extra = _epipolar_check(
             cam,
             transforms[r_img].to_mm(ref_xy0[ts]),
             transforms[img].to_mm(xy),
             res["ok"],
             transforms[img].pixel_mm,
+            res["sigma"],
         )
+        sigma = np.sqrt(np.asarray(res["sigma"], float) ** 2 + extra)
         local_ok = _local_check(ref_xy0[ts], res["xy"], res["ok"])
         near = np.abs(xy - level_to_full(start, level)).max(axis=1) <= jump
         for j, t in enumerate(ts):
@@ -746,7 +805,7 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
                 continue
             guided["measured"] += int(is_guided)
             obs[int(t)].append((img, float(xy[j][0]), float(xy[j][1]),
-                                float(res["sigma"][j]), float(res["corr"][j])))  # fmt: skip
+                                float(sigma[j]), float(res["corr"][j])))  # fmt: skip
     # two-fold points selectively: at most max_twofold_per_pair per model, spread over it
     twofold: dict[tuple[int, int], list[int]] = {}
     for t in range(len(nodes)):
