@@ -628,7 +628,7 @@ class Truth:
 
 
 def render_image(
-    truth: Truth, n: int, *, noise: bool = True, rows_per_chunk: int = 128
+    truth: Truth, n: int, *, noise: bool = True, rows_per_chunk: int = 64
 ) -> np.ndarray:
     """The uint8 image of number ``n`` (see the module docstring for the model).
 
