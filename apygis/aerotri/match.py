@@ -77,9 +77,10 @@ class MatchOptions:
     points_per_image: int = 5000
     search_px: float = 30.0
     ncc_min: float = 0.7
-    half: int = 7
+    half: int = 10
     corr_min: float = 0.8
     max_twofold_per_pair: int = 60
+    min_points_per_image: int = 1000
     scheduler: str | None = None
     workers: int | None = None
 
@@ -128,7 +129,7 @@ def _task_features(pyramid: str, level: int, n: int) -> np.ndarray:
     finally:
         src.close()
     grid = max(1, round(math.sqrt(n / 60)))
-    pts = foerstner(img, max_points=n, grid=grid)
+    pts = foerstner(img, max_points=n, grid=grid, w_factor=0.5, radius=3)
     return pts.xy.astype(np.float32)
 
 
@@ -465,17 +466,27 @@ def _local_affines(tree, src: np.ndarray, dst: np.ndarray, at: np.ndarray):
     return A, pred, dist[:, -1]
 
 
-def _spread_pick(xy: np.ndarray, n: int, cell: float) -> np.ndarray:
-    """Indices of at most ``n`` points, one per grid cell first (spread over the model)."""
-    if len(xy) <= n:
-        return np.arange(len(xy))
-    key = np.floor(xy / cell).astype(np.int64)
-    _, first = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
+def _spread_pick(xy: np.ndarray, n: int, cell: float, *, ordered: bool = False) -> np.ndarray:
+    """Indices of at most ``n`` points, spread: one per grid cell first, then the rest.
+
+    ``ordered``: return them in that order (a prefix of any length is spread),
+    otherwise sorted. The choice within a round is pseudo-random with a fixed seed.
+    """
+    m = len(xy)
+    if m == 0:
+        return np.arange(0)
+    key = np.floor(np.asarray(xy) / cell).astype(np.int64)
+    cells = key[:, 0] * 1_000_003 + key[:, 1]
     rng = np.random.default_rng(0)
-    if len(first) >= n:
-        return np.sort(rng.choice(first, n, replace=False))
-    rest = np.setdiff1d(np.arange(len(xy)), first)
-    return np.sort(np.concatenate([first, rng.choice(rest, n - len(first), replace=False)]))
+    perm = rng.permutation(m)
+    # the rank of each point within its cell (in random order): round 0 takes one per cell
+    c = cells[perm]
+    srt = np.argsort(c, kind="stable")
+    starts = np.searchsorted(c[srt], c[srt], side="left")
+    rank = np.empty(m, dtype=np.int64)
+    rank[srt] = np.arange(m) - starts
+    out = perm[np.lexsort((np.arange(m), rank))][:n]
+    return out if ordered else np.sort(out)
 
 
 # --- the pipeline -------------------------------------------------------------------------
@@ -806,18 +817,7 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
             guided["measured"] += int(is_guided)
             obs[int(t)].append((img, float(xy[j][0]), float(xy[j][1]),
                                 float(sigma[j]), float(res["corr"][j])))  # fmt: skip
-    # two-fold points selectively: at most max_twofold_per_pair per model, spread over it
-    twofold: dict[tuple[int, int], list[int]] = {}
-    for t in range(len(nodes)):
-        if len(obs[t]) == 1:
-            twofold.setdefault((ref_of[t][0], obs[t][0][0]), []).append(t)
-    for (r_img, _), ts_two in twofold.items():
-        cell = max(images[r_img].width, images[r_img].height) / 20
-        chosen = set(_spread_pick(ref_xy0[ts_two], opt.max_twofold_per_pair, cell).tolist())
-        for k, t in enumerate(ts_two):
-            if k not in chosen:
-                obs[t] = []
-                rejected["two-fold not needed"] = rejected.get("two-fold not needed", 0) + 1
+    _select_twofold(obs, ref_of, ref_xy0, images, opt, rejected)
     good = [t for t in range(len(nodes)) if len(obs[t]) >= 1]
     rejected["fewer than 2 images"] = len(nodes) - len(good)
     names = block.tie_names(len(good))
@@ -854,6 +854,52 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
         rejected=rejected,
         guided=guided,
     )
+
+
+def _select_twofold(obs, ref_of, ref_xy0, images, opt: MatchOptions, rejected: dict) -> None:
+    """Keep two-fold points selectively (the seed: "tracked only selectively").
+
+    Each model keeps at most ``max_twofold_per_pair`` two-fold points, spread over
+    it (one per cell of a 20 x 20 grid of the reference image first); an image
+    that still has fewer than ``min_points_per_image`` observations then takes
+    more two-fold points of its models, spread likewise, up to its deficit.
+    The others are dropped (counted as "two-fold not needed").
+    """
+    twofold: dict[tuple[int, int], list[int]] = {}
+    count: dict[int, int] = dict.fromkeys(images, 0)
+    for t, o in obs.items():
+        if len(o) == 1:
+            twofold.setdefault((ref_of[t][0], o[0][0]), []).append(t)
+        elif len(o) > 1:
+            count[ref_of[t][0]] += 1
+            for img, *_ in o:
+                count[img] += 1
+    order: dict[tuple[int, int], list[int]] = {}
+    for (r_img, img), ts in twofold.items():
+        cell = max(images[r_img].width, images[r_img].height) / 20
+        pick = _spread_pick(ref_xy0[ts], len(ts), cell, ordered=True)
+        order[(r_img, img)] = [ts[k] for k in pick]
+    taken: dict[tuple[int, int], int] = {}
+    for key, ts in order.items():
+        taken[key] = min(len(ts), opt.max_twofold_per_pair)
+        count[key[0]] += taken[key]
+        count[key[1]] += taken[key]
+    for n in sorted(images, key=lambda n: count[n]):
+        deficit = opt.min_points_per_image - count[n]
+        models = [k for k in order if n in k and taken[k] < len(order[k])]
+        while deficit > 0 and models:
+            for k in list(models):
+                if taken[k] >= len(order[k]):
+                    models.remove(k)
+                    continue
+                taken[k] += 1
+                count[k[0]] += 1
+                count[k[1]] += 1
+                deficit -= 1
+    for key, ts in order.items():
+        for t in ts[taken[key] :]:
+            obs[t] = []
+            rejected["two-fold not needed"] = rejected.get("two-fold not needed", 0) + 1
 
 
 def _stage_gaps(block: Block, bplan, images, tz: float) -> dict[tuple[int, int], list[int]]:
