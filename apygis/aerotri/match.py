@@ -620,6 +620,16 @@ def _stage_features(block: Block, images, pyr, level: int, opt: MatchOptions, ru
     return feats
 
 
+#: Least overlap for which a cross-strip pair is checked by a relative orientation (as the
+#: pairs of a strip) rather than a homography, which relief bends.
+RO_MIN_OVERLAP = 0.2
+
+
+def _model_kind(p) -> str:
+    """The outlier model of a pair for :func:`apygis.aerotri.fbm.match_pair`."""
+    return "strip" if p.kind == "strip" or p.overlap >= RO_MIN_OVERLAP else "cross"
+
+
 def _stage_pairs(
     block, bplan, images, cams, pyr, transforms, feats, level, tz, opt, runner, progress
 ):
@@ -649,7 +659,7 @@ def _stage_pairs(
         todo.append(
             (
                 (p.a, p.b),
-                (pyr[p.a], pyr[p.b], level, feats[p.a], feats[p.b], predict, p.kind,
+                (pyr[p.a], pyr[p.b], level, feats[p.a], feats[p.b], predict, _model_kind(p),
                  transforms[p.a].to_list(), transforms[p.b].to_list(), cam.focal_mm, opt),
             )
         )  # fmt: skip
