@@ -96,3 +96,26 @@ def test_readme_command_line_examples_run_and_write_only_under_out(tmp_path):
     new = {p for p in _files(root) - before if p.parts[0] != "home"}
     assert new
     assert all(p.parts[0] == "out" for p in new), sorted(map(str, new))
+
+
+def test_readme_aerotriangulation_demo_runs_and_writes_only_under_out(tmp_path):
+    """The README's aerotriangulation demo (one command line of ``&&``-joined ``apygis at``
+    commands) runs as written, writes only under ``out/`` and ends with tie points."""
+    text = (ROOT / "README.md").read_text()
+    block = next(b for b in _sh_blocks(text) if b.startswith("apygis at synth out/"))
+    (line,) = [ln for ln in block.splitlines() if ln.strip()]
+    commands = [c.strip() for c in line.split("&&")]
+    assert [c.split()[:2] for c in commands] == [
+        ["apygis", "at"],
+        ["apygis", "at"],
+        ["apygis", "at"],
+        ["apygis", "at"],
+    ]
+    root = _sandbox(tmp_path)
+    (root / "home").mkdir()
+    before = _files(root)
+    _run_readme_commands(commands, root)
+    new = {p for p in _files(root) - before if p.parts[0] != "home"}
+    assert all(p.parts[0] == "out" for p in new), sorted(map(str, new))
+    assert (root / "out" / "at-demo.png").is_file()
+    assert (root / "out" / "at-demo.block").is_file()

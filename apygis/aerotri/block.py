@@ -35,7 +35,7 @@ from apygis.errors import ApygisError, FileOverwriteError
 
 __all__ = ["SCHEMA_VERSION", "Block", "BlockError", "ImageRecord"]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 
 class BlockError(ApygisError, ValueError):
@@ -89,7 +89,11 @@ CREATE TABLE runs (
 """
 
 #: Migrations: ``version -> SQL`` that brings a block of that version to the next.
-MIGRATIONS: dict[int, str] = {}
+MIGRATIONS: dict[int, str] = {
+    # 2: the azimuth of each image's photo x axis, found by matching when a camera is
+    # yawed against the flight (drones); NULL: along the flight
+    1: "ALTER TABLE images ADD COLUMN x_azimuth_deg REAL;",
+}
 
 POINT_KINDS = ("tie", "new", "full", "planimetric", "height", "check")
 
@@ -109,6 +113,7 @@ class ImageRecord:
     Z: float | None
     heading_deg: float | None
     position_source: str
+    x_azimuth_deg: float | None = None
 
 
 def _now() -> str:
@@ -252,7 +257,8 @@ class Block:
         with self.conn:
             for r in rows:
                 self.conn.execute(
-                    "INSERT INTO images VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
+                    "INSERT INTO images (image, strip, camera, path, width, height, X, Y, Z, "
+                    "heading_deg, position_source, exif_time) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
                     (
                         r["image"], r.get("strip"), r["camera"], self._stored_path(r["path"]),
                         r["width"], r["height"], r.get("X"), r.get("Y"), r.get("Z"),
@@ -263,17 +269,19 @@ class Block:
     def images(self) -> list[ImageRecord]:
         rows = self.conn.execute(
             "SELECT image, strip, camera, path, width, height, X, Y, Z, heading_deg, "
-            "position_source FROM images ORDER BY image"
+            "position_source, x_azimuth_deg FROM images ORDER BY image"
         ).fetchall()
         base = self.path.parent
         return [
-            ImageRecord(r[0], r[1], r[2], base / r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10])
+            ImageRecord(
+                r[0], r[1], r[2], base / r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11]
+            )
             for r in rows
         ]  # fmt: skip
 
     def update_images(self, values: dict[int, dict]) -> None:
         """Set columns (strip, heading_deg, X, Y, Z) of images: ``{image: {column: value}}``."""
-        allowed = {"strip", "heading_deg", "X", "Y", "Z", "position_source"}
+        allowed = {"strip", "heading_deg", "X", "Y", "Z", "position_source", "x_azimuth_deg"}
         with self.conn:
             for image, cols in values.items():
                 for k, v in cols.items():

@@ -101,6 +101,7 @@ class MatchReport:
     gaps: dict[tuple[int, int], list[int]] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
     guided: dict[str, int] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
 
 
 # --- tasks (module level: they run in worker processes) ---------------------------------
@@ -269,6 +270,11 @@ def intermediate_level(source_shape: tuple[int, int], levels: int, max_px: int) 
         if max(-(-h // 2**k), -(-w // 2**k)) <= max_px:
             return k
     return levels - 1
+
+
+def _x_azimuth(im, bplan) -> float:
+    """The azimuth of an image's photo x axis: as matched, else the flight direction."""
+    return bplan.headings[im.image] if im.x_azimuth_deg is None else im.x_azimuth_deg
 
 
 def _approx_eo(X: float, Y: float, Z: float, heading_deg: float) -> ExteriorOrientation:
@@ -539,12 +545,16 @@ def match_block(
                 block, bplan, images, cams, pyr, transforms, feats, level, tz, opt, runner, stage(3)
             )
             lap("pairs")
+            notes = _stage_azimuths(block, bplan, images, transforms, feats, level)
+            images = {im.image: im for im in block.images()}
+            bplan = block_plan(block, terrain_z=terrain_z)
             report = _stage_tracking(
                 block, bplan, images, pyr, transforms, feats, level, opt, runner, stage(4)
             )
             lap("tracking")
         report.pairs_failed = failed
         report.flagged_interior = flagged
+        report.notes = notes
         report.gaps = _stage_gaps(block, bplan, images, tz)
         lap("gaps")
         report.seconds = seconds
@@ -645,8 +655,8 @@ def _stage_pairs(
         predict = None
         try:
             predict = homography_from_orientations(
-                _approx_eo(ia.X, ia.Y, ia.Z, bplan.headings[p.a]),
-                _approx_eo(ib.X, ib.Y, ib.Z, bplan.headings[p.b]),
+                _approx_eo(ia.X, ia.Y, ia.Z, _x_azimuth(ia, bplan)),
+                _approx_eo(ib.X, ib.Y, ib.Z, _x_azimuth(ib, bplan)),
                 cam.focal_mm,
                 transforms[p.a],
                 transforms[p.b],
@@ -670,6 +680,69 @@ def _stage_pairs(
         if progress is not None:
             progress(k, len(todo))
     return [(p["a"], p["b"], p["reason"]) for p in block.pairs() if p["status"] == "failed"]
+
+
+#: Photo x axes turned by more than this from the flight direction are reported.
+AZIMUTH_NOTE_DEG = 20.0
+
+
+def _stage_azimuths(block: Block, bplan, images, transforms, feats, level: int) -> list[str]:
+    """The azimuth of each image's photo x axis, from the matches of its strip neighbours.
+
+    Between consecutive images ``a``, ``b`` of a strip (``b`` later along the
+    flight) the ground moves backwards through the frame: the shift ``s`` of the
+    frame centre under the pair's similarity (RANSAC over the block-formation
+    matches), in photo coordinates (the images' interior orientations), points
+    against the flight. The flight direction makes the angle
+    ``theta = atan2(-s_y, -s_x)`` with the photo x axis (counter-clockwise), so
+    the x axis has the azimuth ``heading + theta`` (degrees clockwise from north;
+    0 when the photo x axis points along the flight, as film cameras fly). Each
+    image takes the circular mean over its strip pairs; images without a matched
+    strip neighbour keep the flight direction. Stored as ``x_azimuth_deg``.
+    """
+    import cv2
+
+    estimates: dict[int, list[float]] = {}
+    matches = {(a, b): (ia, ib) for a, b, ia, ib in block.pair_matches()}
+    for strip in bplan.strips.values():
+        for a, b in zip(strip.images, strip.images[1:], strict=False):
+            key = (min(a, b), max(a, b))
+            if key not in matches or len(matches[key][0]) < 8:
+                continue
+            ia, ib = matches[key]
+            pa, pb = feats[key[0]][ia], feats[key[1]][ib]
+            if key[0] != a:
+                pa, pb = pb, pa
+            M, _ = cv2.estimateAffinePartial2D(pa, pb, method=cv2.RANSAC)
+            if M is None:
+                continue
+            for img, src in ((b, True), (a, False)):
+                h, w = images[img].height / 2**level, images[img].width / 2**level
+                c = np.array([(w - 1) / 2, (h - 1) / 2])
+                shift_px = (M[:, :2] @ c + M[:, 2]) - c  # a -> b, pixels of the level
+                lin = transforms[img].matrix[:2, :2]
+                s_mm = lin @ shift_px
+                theta = math.degrees(math.atan2(-s_mm[1], -s_mm[0]))
+                estimates.setdefault(img, []).append(bplan.headings[b if src else a] + theta)
+    values: dict[int, dict] = {}
+    turned = []
+    for img, est in estimates.items():
+        r = np.radians(est)
+        az = math.degrees(math.atan2(np.mean(np.sin(r)), np.mean(np.cos(r)))) % 360.0
+        values[img] = {"x_azimuth_deg": az}
+        off = (az - bplan.headings[img] + 180.0) % 360.0 - 180.0
+        if abs(off) > AZIMUTH_NOTE_DEG:
+            turned.append((img, off))
+    block.update_images(values)
+    notes = []
+    if turned:
+        offs = sorted({round(o / 5) * 5 for _, o in turned})
+        notes.append(
+            f"{len(turned)} images have their photo x axis turned against the flight "
+            f"direction (by about {', '.join(f'{o:+.0f}' for o in offs)} degrees: a camera "
+            "yawed against its course); their approximate orientations are corrected"
+        )
+    return notes
 
 
 def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, runner, progress):
@@ -933,7 +1006,7 @@ def _stage_gaps(block: Block, bplan, images, tz: float) -> dict[tuple[int, int],
         im = images[a]
         cam = cams[im.camera]
         io = InteriorOrientation(cam.focal_mm, cam.x0_mm, cam.y0_mm)
-        eo = _approx_eo(im.X, im.Y, im.Z, bplan.headings[a])
+        eo = _approx_eo(im.X, im.Y, im.Z, _x_azimuth(im, bplan))
         if common:
             mm = np.array([per_image[a][c] for c in common])
             ground = photo_to_ground(mm, tz, eo, io)[:, :2]

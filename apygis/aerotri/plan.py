@@ -83,6 +83,10 @@ class PlanImage:
     heading_deg : float or None
         Flight azimuth (module docstring); ``None``: derived from the strip
         (:func:`derive_headings`).
+    x_azimuth_deg : float or None
+        Azimuth of the photo x axis when it is known not to point along the
+        flight (a drone's camera yawed against its course, found by matching);
+        ``None``: along the flight. Only the footprint uses it.
     """
 
     image: int
@@ -91,6 +95,7 @@ class PlanImage:
     Y: float
     Z: float
     heading_deg: float | None = None
+    x_azimuth_deg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -523,7 +528,15 @@ def plan_block(
         )
     headings = derive_headings(imgs)
     numbers = sorted(by_number)
-    fps = {i: footprint(by_number[i], frame, terrain_z, headings[i]) for i in numbers}
+    fps = {
+        i: footprint(
+            by_number[i],
+            frame,
+            terrain_z,
+            headings[i] if by_number[i].x_azimuth_deg is None else by_number[i].x_azimuth_deg,
+        )
+        for i in numbers
+    }
 
     # strips: ordered along their flight direction (mean heading of their images)
     members: dict[int, list[int]] = {}

@@ -288,6 +288,7 @@ def block_plan(
             float(im.Y or 0),
             float(im.Z or 0),
             im.heading_deg,
+            im.x_azimuth_deg,
         )
         for im in images
     ]

@@ -213,6 +213,8 @@ def at_match(block, scheduler, workers, points_per_image, corr_min, terrain_heig
     skipped = {k: v for k, v in r.rejected.items() if v}
     if skipped:
         click.echo("rejected: " + ", ".join(f"{k} {v}" for k, v in skipped.items()))
+    for note in r.notes:
+        click.echo(f"note: {note}")
     if r.flagged_interior:
         click.echo(f"interior orientation flagged: images {r.flagged_interior}")
     if r.gaps:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sqlite3
 
 import numpy as np
@@ -129,3 +130,21 @@ def test_features_matches_tasks_roundtrip(tmp_path):
         run = b.start_run("match", {"x": 1})
         b.finish_run(run, "done", {"points": 3})
         assert b.runs()[-1]["status"] == "done"
+
+
+def test_a_version_1_block_is_migrated(tmp_path):
+    """A block written with schema 1 (no x_azimuth_deg) opens, migrated once, its data kept."""
+    path = tmp_path / "v1.block"
+    con = sqlite3.connect(path)
+    con.executescript(blockmod.SCHEMA_V1)
+    con.execute("INSERT INTO meta VALUES ('schema_version', '1')")
+    con.execute("INSERT INTO cameras VALUES (1, 'c', ?)", (json.dumps(CAM.to_dict()),))
+    con.execute("INSERT INTO images VALUES (5, 1, 1, 'a.tif', 600, 400, 1, 2, 3, 90, 'list', NULL)")
+    con.commit()
+    con.close()
+    with Block.open(path) as b:
+        assert b.meta("schema_version") == str(SCHEMA_VERSION) == "2"
+        (im,) = b.images()
+        assert (im.image, im.heading_deg, im.x_azimuth_deg) == (5, 90.0, None)
+        b.update_images({5: {"x_azimuth_deg": 270.0}})
+        assert b.images()[0].x_azimuth_deg == 270.0
