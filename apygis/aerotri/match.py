@@ -45,6 +45,7 @@ arrives, so an interrupted run continues where it stopped:
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -83,6 +84,8 @@ class MatchOptions:
     min_points_per_image: int = 1000
     scheduler: str | None = None
     workers: int | None = None
+    interior_model: str = "affine"
+    subblock: int | None = None
 
 
 @dataclass
@@ -111,12 +114,12 @@ def _task_pyramid(image: str, pyramid: str) -> str:
     return str(build_pyramid(image, pyramid))
 
 
-def _task_interior(pyramid: str, camera: dict, image: int) -> dict:
+def _task_interior(pyramid: str, camera: dict, image: int, model: str) -> dict:
     from apygis.aerotri.interior import interior_orientation
 
     src = PyramidSource(pyramid)
     try:
-        res = interior_orientation(src, Camera.from_dict(camera), name=str(image))
+        res = interior_orientation(src, Camera.from_dict(camera), model=model, name=str(image))
     finally:
         src.close()
     return res.to_dict()
@@ -510,10 +513,23 @@ def match_block(
         raise BlockError(f"{block.path}: the block has no images")
     cams = block.cameras()
     bplan = block_plan(block, terrain_z=terrain_z)
-    pairs = bplan.pairs
-    if not pairs:
+    if not bplan.pairs:
         raise BlockError(f"{block.path}: the plan has no overlapping image pairs")
-    block.set_pairs((p.a, p.b, p.kind, p.overlap) for p in pairs)
+    block.set_pairs((p.a, p.b, p.kind, p.overlap) for p in bplan.pairs)
+    todo_plan = bplan
+    work = images
+    if opt.subblock is not None:
+        subblocks = block.subblocks() or bplan.subblocks
+        if not 1 <= opt.subblock <= len(subblocks):
+            raise BlockError(
+                f"{block.path}: subblock {opt.subblock} does not exist "
+                f"(the plan has {len(subblocks)}; 'apygis at plan --subblock-strips N' makes them)"
+            )
+        strips = set(subblocks[opt.subblock - 1])
+        work = {n: im for n, im in images.items() if bplan_strip(bplan, n) in strips}
+        todo_plan = dataclasses.replace(
+            bplan, pairs=[p for p in bplan.pairs if p.a in work and p.b in work]
+        )
     tz = terrain_height(block, terrain_z)
     run = block.start_run("match", {k: v for k, v in vars(opt).items()})
     steps = 6
@@ -532,21 +548,25 @@ def match_block(
     try:
         with Runner(opt.scheduler, opt.workers) as runner:
             lap("start")
-            pyr = _stage_pyramids(block, images, runner, stage(0))
+            pyr = _stage_pyramids(block, work, runner, stage(0))
             lap("pyramids")
-            transforms, flagged = _stage_interior(block, images, cams, pyr, runner, stage(1))
+            transforms, flagged = _stage_interior(block, work, cams, pyr, runner, stage(1), opt)
             lap("interior")
             src0 = PyramidSource(next(iter(pyr.values())))
             level = intermediate_level(src0.shape(0), src0.levels, opt.intermediate_px)
             src0.close()
-            feats = _stage_features(block, images, pyr, level, opt, runner, stage(2))
+            feats = _stage_features(block, work, pyr, level, opt, runner, stage(2))
             lap("features")
             failed = _stage_pairs(
-                block, bplan, images, cams, pyr, transforms, feats, level, tz, opt, runner, stage(3)
-            )
+                block, todo_plan, work, cams, pyr, transforms, feats, level, tz, opt, runner,
+                stage(3),
+            )  # fmt: skip
             lap("pairs")
+            # tracking joins everything matched so far (other subblocks through their
+            # common strips): the images already prepared by earlier runs take part
+            pyr, transforms, feats = _prepared(block, images, level)
             notes = _stage_azimuths(block, bplan, images, transforms, feats, level)
-            images = {im.image: im for im in block.images()}
+            images = {im.image: im for im in block.images() if im.image in feats}
             bplan = block_plan(block, terrain_z=terrain_z)
             report = _stage_tracking(
                 block, bplan, images, pyr, transforms, feats, level, opt, runner, stage(4)
@@ -572,6 +592,27 @@ def match_block(
     return report
 
 
+def bplan_strip(bplan, image: int) -> int:
+    """The strip of an image in a plan."""
+    return int(bplan.images[image].strip)
+
+
+def _prepared(block: Block, images, level: int):
+    """Pyramid paths, pixel transforms and level-``level`` features of every image that an
+    earlier stage (of this run or an earlier one) prepared."""
+    interior = block.interior()
+    pyr, transforms, feats = {}, {}, {}
+    for n in images:
+        xy = block.features(n, level)
+        path = block.pyramid_folder / f"{n}.tif"
+        if xy is None or n not in interior or not path.is_file():
+            continue
+        pyr[n] = str(path)
+        transforms[n] = PixelTransform.from_list(interior[n]["transform"])
+        feats[n] = xy
+    return pyr, transforms, feats
+
+
 def _stage_pyramids(block: Block, images, runner: Runner, progress) -> dict[int, str]:
     folder = block.pyramid_folder
     out = {n: str(folder / f"{n}.tif") for n in images}
@@ -587,7 +628,7 @@ def _stage_pyramids(block: Block, images, runner: Runner, progress) -> dict[int,
     return out
 
 
-def _stage_interior(block: Block, images, cams, pyr, runner: Runner, progress):
+def _stage_interior(block: Block, images, cams, pyr, runner: Runner, progress, opt):
     done = block.interior()
     todo = []
     for n, im in images.items():
@@ -602,7 +643,7 @@ def _stage_interior(block: Block, images, cams, pyr, runner: Runner, progress):
                  "flagged": False},
             )  # fmt: skip
         else:
-            todo.append((n, (pyr[n], cam.to_dict(), n)))
+            todo.append((n, (pyr[n], cam.to_dict(), n, opt.interior_model)))
     for k, (n, res) in enumerate(runner.run(_task_interior, todo), 1):
         block.set_interior(int(n), res)
         if progress is not None:
@@ -811,8 +852,9 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
     trees = {k: cKDTree(v[0]) for k, v in corr_xy.items() if len(v[0]) >= LOCAL_NEIGHBOURS}
     neighbours: dict[int, set[int]] = {n: set() for n in images}
     for p in bplan.pairs:
-        neighbours[p.a].add(p.b)
-        neighbours[p.b].add(p.a)
+        if p.a in neighbours and p.b in neighbours:
+            neighbours[p.a].add(p.b)
+            neighbours[p.b].add(p.a)
     # measurements to make: the linked images of each point (block formation), and the
     # neighbouring images of its reference image that should see it too (guided)
     ref_L_all = full_to_level(ref_xy0, level)
@@ -1000,8 +1042,11 @@ def _stage_gaps(block: Block, bplan, images, tz: float) -> dict[tuple[int, int],
     gaps: dict[tuple[int, int], list[int]] = {}
     with block.conn:
         block.conn.execute("DELETE FROM gaps")
+    matched = {(p["a"], p["b"]) for p in block.pairs() if p["status"] == "matched"}
     for p in bplan.pairs:
         a, b = p.a, p.b
+        if (a, b) not in matched:
+            continue
         common = sorted(set(per_image.get(a, {})) & set(per_image.get(b, {})))
         im = images[a]
         cam = cams[im.camera]

@@ -94,6 +94,7 @@ def init_block(
     crs: str | None = None,
     overwrite: bool = False,
     terrain_z: float | None = None,
+    tie_names: tuple[int, int] = (1000000, 1),
     progress=None,
 ) -> InitReport:
     """Create a block (see the module docstring).
@@ -221,6 +222,9 @@ def init_block(
         )
         if terrain_z is not None:
             block.set_meta("terrain_z", terrain_z)
+        block.set_meta("tie_name_start", tie_names[0])
+        block.set_meta("tie_name_next", tie_names[0])
+        block.set_meta("tie_name_interval", tie_names[1])
         block.set_meta("notes", "\n".join(notes))
         run = block.start_run("init", {"camera": str(camera), "images": str(images)})
         block.finish_run(run, "done", {"images": len(entries), "control": len(points)})

@@ -60,15 +60,27 @@ def at() -> None:
 @click.option("--control", type=_in_file, default=None, help="Control points (CSV).")
 @click.option("--crs", default=None, help="Block CRS (default: the UTM zone of EXIF positions).")
 @click.option("--terrain-height", type=float, default=None, help="Mean terrain height, metres.")
+@click.option(
+    "--tie-names",
+    default="1000000:1",
+    show_default=True,
+    metavar="START[:INTERVAL]",
+    help="Automatic tie point names: the first number and the step (never reissued).",
+)
 @click.option("--overwrite", is_flag=True, help="Replace an existing block.")
 @run_guarded
-def at_init(block, camera, images, control, crs, terrain_height, overwrite):
+def at_init(block, camera, images, control, crs, terrain_height, tie_names, overwrite):
     """Create BLOCK (an SQLite file) from a camera, an image list and control points."""
     from apygis.aerotri.project import init_block
 
     if camera != "exif" and not Path(camera).is_file():
         raise click.BadParameter(
             f"{camera}: no such camera file (or 'exif')", param_hint="--camera"
+        )
+    start, _, step = tie_names.partition(":")
+    if not start.isdigit() or not (step or "1").isdigit() or int(step or "1") < 1:
+        raise click.BadParameter(
+            f"{tie_names!r}: expected START[:INTERVAL], whole numbers", param_hint="--tie-names"
         )
     with _bar(f"reading {images}") as bar:
         r = init_block(
@@ -79,6 +91,7 @@ def at_init(block, camera, images, control, crs, terrain_height, overwrite):
             crs=crs,
             overwrite=overwrite,
             terrain_z=terrain_height,
+            tie_names=(int(start), int(step or "1")),
             progress=_advance(bar),
         )
     click.echo(
@@ -181,10 +194,25 @@ def _plan_json(p) -> dict:
 )
 @click.option("--terrain-height", type=float, default=None, help="Mean terrain height, metres.")
 @click.option(
+    "--interior-model",
+    type=click.Choice(["affine", "similarity", "projective"]),
+    default="affine",
+    show_default=True,
+    help="Pixel -> photo transform fitted to the fiducials of scanned film.",
+)
+@click.option(
+    "--subblock",
+    type=click.IntRange(1, 100000),
+    default=None,
+    help="Prepare and match only this subblock ('at plan --subblock-strips N'); the "
+    "tie points join all subblocks matched so far through their common strips.",
+)
+@click.option(
     "--display", type=_picture, default=None, help="Block display picture (.png or .pdf)."
 )
 @run_guarded
-def at_match(block, scheduler, workers, points_per_image, corr_min, terrain_height, display):
+def at_match(block, scheduler, workers, points_per_image, corr_min, terrain_height,
+             interior_model, subblock, display):  # fmt: skip
     """Fully automatic tie points: block formation, then least-squares point tracking.
 
     Results are committed to BLOCK as tasks finish: run again after an
@@ -196,7 +224,12 @@ def at_match(block, scheduler, workers, points_per_image, corr_min, terrain_heig
 
     _check_picture(display)
     opt = MatchOptions(
-        points_per_image=points_per_image, corr_min=corr_min, scheduler=scheduler, workers=workers
+        points_per_image=points_per_image,
+        corr_min=corr_min,
+        scheduler=scheduler,
+        workers=workers,
+        interior_model=interior_model,
+        subblock=subblock,
     )
     with _open(block) as b:
         with _bar(f"matching {block}") as bar:
