@@ -105,6 +105,9 @@ class MatchReport:
     seconds: dict[str, float] = field(default_factory=dict)
     guided: dict[str, int] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    #: median over the image pairs of the RMS distance (full-resolution pixels) of the
+    #: accepted measurements from their epipolar lines: the relative orientations' residual
+    epipolar_rms_px: float | None = None
 
 
 # --- tasks (module level: they run in worker processes) ---------------------------------
@@ -351,7 +354,7 @@ def _extra_variance(z: np.ndarray, var: np.ndarray) -> float:
 
 def _epipolar_check(
     cam: Camera, mm_ref: np.ndarray, mm_search: np.ndarray, ok, pixel_mm: float, sigma
-) -> tuple[np.ndarray, float]:
+) -> tuple[np.ndarray, float, float]:
     """The measurements consistent with the pair's relative orientation, and the variance
     (px^2) that the measurements' own sigmas lack.
 
@@ -380,7 +383,7 @@ def _epipolar_check(
     ok = np.asarray(ok, bool)
     out = ok.copy()
     if ok.sum() < 15:
-        return out, 0.0
+        return out, 0.0, float("nan")
     c = cam.focal_mm
 
     def rays(mm):
@@ -394,7 +397,7 @@ def _epipolar_check(
         threshold=1.0 / scale,
     )  # fmt: skip
     if E is None or E.shape != (3, 3):
-        return out, 0.0
+        return out, 0.0, float("nan")
     E = _refined(E, ur[ok], us[ok], 3.0 / scale)
 
     def distances(E):
@@ -405,12 +408,13 @@ def _epipolar_check(
     robust = 1.4826 * np.median(np.abs(z[ok] - np.median(z[ok])))
     out = ok & (np.abs(z) <= max(EPIPOLAR_K * robust, EPIPOLAR_MIN_PX))
     if out.sum() < 15:
-        return out, 0.0
+        return out, 0.0, float(robust)
+    rms = float(np.sqrt(np.mean(z[out] ** 2)))
     var = np.asarray(sigma, float)[out] ** 2
     good = np.isfinite(var) & (var > 0)
     if good.sum() < 15:
-        return out, 0.0
-    return out, _extra_variance(z[out][good], var[good])
+        return out, 0.0, rms
+    return out, _extra_variance(z[out][good], var[good]), rms
 
 
 #: Local test: a measurement farther than LOCAL_K robust standard deviations (and
@@ -587,7 +591,12 @@ def match_block(
     block.finish_run(
         run,
         "done",
-        {"points": report.points, "observations": report.observations, "level": level},
+        {
+            "points": report.points,
+            "observations": report.observations,
+            "level": level,
+            "epipolar_rms_px": report.epipolar_rms_px,
+        },
     )
     return report
 
@@ -905,6 +914,7 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
     jump = 2.0**level * 2.0
     rejected = {"jumped": 0, "epipolar": 0, "local": 0, "fewer than 2 images": 0}
     guided = {"tried": 0, "measured": 0}
+    epipolar: list[float] = []
     obs: dict[int, list[tuple[int, float, float, float, float]]] = {
         t: [] for t in range(len(nodes))
     }
@@ -912,7 +922,7 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
         res = results[(r_img, img)]
         cam = cams[images[img].camera]
         xy = np.where(np.isfinite(res["xy"]), res["xy"], 0.0)
-        epi_ok, extra = _epipolar_check(
+        epi_ok, extra, epi_rms = _epipolar_check(
             cam,
             transforms[r_img].to_mm(ref_xy0[ts]),
             transforms[img].to_mm(xy),
@@ -921,6 +931,8 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
             res["sigma"],
         )
         sigma = np.sqrt(np.asarray(res["sigma"], float) ** 2 + extra)
+        if np.isfinite(epi_rms):
+            epipolar.append(epi_rms)
         local_ok = _local_check(ref_xy0[ts], res["xy"], res["ok"])
         near = np.abs(xy - level_to_full(start, level)).max(axis=1) <= jump
         for j, t in enumerate(ts):
@@ -978,6 +990,7 @@ def _stage_tracking(block, bplan, images, pyr, transforms, feats, level, opt, ru
         multiplicity=dict(sorted(mult_table.items())),
         rejected=rejected,
         guided=guided,
+        epipolar_rms_px=float(np.median(epipolar)) if epipolar else None,
     )
 
 

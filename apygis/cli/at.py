@@ -241,6 +241,11 @@ def at_match(block, scheduler, workers, points_per_image, corr_min, terrain_heig
         f"(block formation at pyramid level {r.level})"
     )
     click.echo("multiplicity: " + ", ".join(f"{k}-fold {v}" for k, v in r.multiplicity.items()))
+    if r.epipolar_rms_px is not None:
+        click.echo(
+            f"relative orientations: measurements {r.epipolar_rms_px:.3f} px RMS from their "
+            "epipolar lines (median over the image pairs)"
+        )
     for a, b_, why in r.pairs_failed:
         click.echo(f"pair {a}-{b_} not matched: {why}")
     skipped = {k: v for k, v in r.rejected.items() if v}
