@@ -17,12 +17,14 @@ import apygis
 
 PKG = Path(apygis.__file__).parent
 
-# part -> the other parts of apygis it may import (errors, progress and fileio are the floor)
-FLOOR = {"errors", "progress", "fileio"}
+# part -> the other parts of apygis it may import (errors, progress, fileio and tasks are
+# the floor)
+FLOOR = {"errors", "progress", "fileio", "tasks"}
 ALLOWED: dict[str, set[str]] = {
     "errors": set(),
     "progress": set(),
     "fileio": {"errors"},  # atomic writes, guarded reads and JSON, for every layer
+    "tasks": set(),  # independent tasks in this process, local processes or a Dask cluster
     "model": FLOOR,
     "orient": {"errors", "fileio"},
     "instrument": {"errors", "fileio"},

@@ -40,6 +40,10 @@ OTHERS = {
     "apygis.formats.batch.convert_many",
     "apygis.formats.dxf.write.encode",
     "apygis.plot.drawing.build_drawing",
+    "apygis.aerotri.synth.synth_block",
+    "apygis.aerotri.project.init_block",
+    "apygis.aerotri.pyramid.build_pyramid",
+    "apygis.aerotri.match.match_block",
 }
 # called by the gpkg, shp, geojson and fgb drivers' readers and writers (closures)
 OTHERS |= {"apygis.formats.ogr.read", "apygis.formats.ogr.write"}
@@ -191,3 +195,37 @@ def test_the_protocol_and_helpers():
     assert fraction(5, 4) == 1.0
     with pytest.raises(ValueError, match="step 2 of 2"):
         phase(rec, 2, 2)
+
+
+def test_aerotri_progress(tmp_path):
+    """A two-image synthetic block through synth, init, a pyramid and match."""
+    from apygis.aerotri.block import Block
+    from apygis.aerotri.match import MatchOptions, match_block
+    from apygis.aerotri.project import init_block
+    from apygis.aerotri.pyramid import build_pyramid
+    from apygis.aerotri.synth import SynthSpec, synth_block
+
+    folder = tmp_path / "b"
+    rec = Recorder()
+    synth_block(folder, SynthSpec(strips=1, images_per_strip=2, size_px=500, seed=1), progress=rec)
+    check_calls(rec.calls, "synth_block")
+    rec = Recorder()
+    init_block(
+        tmp_path / "b.block",
+        camera=folder / "camera.toml",
+        images=folder / "images.csv",
+        control=folder / "control.csv",
+        progress=rec,
+    )
+    check_calls(rec.calls, "init_block")
+    image = next(folder.glob("img_*.tif"))
+    for what in ("build_pyramid", "build_pyramid (current)"):
+        rec = Recorder()
+        build_pyramid(image, tmp_path / "p.tif", progress=rec)
+        check_calls(rec.calls, what)
+    assert rec.calls == [(0, 0)]  # the pyramid is current: nothing to do
+    rec = Recorder()
+    with Block.open(tmp_path / "b.block") as b:
+        match_block(b, MatchOptions(scheduler="sync"), progress=rec)
+    check_calls(rec.calls, "match_block")
+    assert rec.calls[-1] == (STEPS, STEPS)

@@ -1,7 +1,7 @@
 """Fully automatic tie points (``apygis at match``): the seed's block formation and point tracking.
 
 The pipeline, stage by stage; every stage is a set of independent tasks
-(:class:`~apygis.aerotri.runner.Runner`: local processes, a Dask cluster, or
+(:class:`~apygis.tasks.Runner`: local processes, a Dask cluster, or
 this process), and each task's result is committed to the block as it
 arrives, so an interrupted run continues where it stopped:
 
@@ -61,9 +61,9 @@ from apygis.aerotri.imagery import full_to_level, level_to_full
 from apygis.aerotri.interest import InterestPoints, foerstner
 from apygis.aerotri.project import block_plan, terrain_height
 from apygis.aerotri.pyramid import PyramidSource, build_pyramid
-from apygis.aerotri.runner import Runner
 from apygis.errors import OrientationError
 from apygis.orient.collinearity import ExteriorOrientation
+from apygis.tasks import Runner
 
 __all__ = ["MatchOptions", "MatchReport", "match_block"]
 
@@ -508,8 +508,13 @@ def _spread_pick(xy: np.ndarray, n: int, cell: float, *, ordered: bool = False) 
 def match_block(
     block: Block, options: MatchOptions | None = None, *, progress=None, terrain_z=None
 ) -> MatchReport:
-    """Measure tie points in a block (module docstring); returns a report."""
-    from apygis.progress import phase
+    """Measure tie points in a block (module docstring); returns a report.
+
+    ``progress(done, total)`` (:mod:`apygis.progress`) runs once over the whole
+    pipeline, its stages (pyramids, interior orientation, interest points, pairs,
+    tracking) as equal parts.
+    """
+    from apygis.progress import STEPS, phase
 
     opt = options or MatchOptions()
     images = {im.image: im for im in block.images()}
@@ -536,7 +541,7 @@ def match_block(
         )
     tz = terrain_height(block, terrain_z)
     run = block.start_run("match", {k: v for k, v in vars(opt).items()})
-    steps = 6
+    steps = 5
 
     def stage(i: int):
         return phase(progress, i, steps) if progress is not None else None
@@ -583,7 +588,7 @@ def match_block(
         lap("gaps")
         report.seconds = seconds
         if progress is not None:
-            progress(1, 1)
+            progress(STEPS, STEPS)
     except BaseException as exc:
         block.finish_run(run, "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed",
                          {"error": str(exc)})  # fmt: skip

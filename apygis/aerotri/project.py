@@ -101,6 +101,7 @@ def init_block(
 
     ``camera`` is a camera file or ``"exif"``; ``images`` an image list (CSV)
     or a folder of images (numbered in name order, positions from EXIF).
+    ``progress(done, total)`` (:mod:`apygis.progress`) counts the images read.
     """
     notes: list[str] = []
     images = Path(images)

@@ -78,7 +78,12 @@ class _Quiet:
 
 
 def build_pyramid(image, pyramid, *, smallest: int = 256, progress=None) -> Path:
-    """Build (or reuse, when current) the pyramid file of ``image`` at ``pyramid``."""
+    """Build (or reuse, when current) the pyramid file of ``image`` at ``pyramid``.
+
+    ``progress(done, total)`` (:mod:`apygis.progress`) counts rows of the full
+    resolution written, with a third more for the overviews; a current pyramid
+    reports ``(0, 0)`` (nothing to do).
+    """
     import rasterio
     from rasterio.enums import Resampling
     from rasterio.errors import RasterioIOError
@@ -86,6 +91,8 @@ def build_pyramid(image, pyramid, *, smallest: int = 256, progress=None) -> Path
 
     image, pyramid = Path(image), Path(pyramid)
     if pyramid_is_current(image, pyramid):
+        if progress is not None:
+            progress(0, 0)
         return pyramid
     pyramid.parent.mkdir(parents=True, exist_ok=True)
     tmp = pyramid.with_name(f".{pyramid.name}.{os.getpid()}.tmp")
@@ -113,13 +120,14 @@ def build_pyramid(image, pyramid, *, smallest: int = 256, progress=None) -> Path
                 "BIGTIFF": "IF_SAFER",
             }
             bands = list(range(1, min(src.count, 3) + 1))
+            total = H + H // 3
             with rasterio.open(tmp, "w", **profile) as dst:
                 for r0 in range(0, H, _ROWS):
                     h = min(_ROWS, H - r0)
                     a = src.read(bands, window=Window(0, r0, W, h))
                     dst.write(_luminance(a, dt), 1, window=Window(0, r0, W, h))
                     if progress is not None:
-                        progress(min(r0 + h, H), H + H // 3)
+                        progress(min(r0 + h, H), total)
                 n = number_of_levels(H, W, smallest)
                 if n > 1:
                     dst.build_overviews([2**k for k in range(1, n)], Resampling.average)
@@ -131,7 +139,7 @@ def build_pyramid(image, pyramid, *, smallest: int = 256, progress=None) -> Path
         if tmp.exists():
             tmp.unlink()
     if progress is not None:
-        progress(1, 1)
+        progress(total, total)
     return pyramid
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from apygis.aerotri.block import Block
 from apygis.aerotri.match import MatchOptions, match_block
-from apygis.aerotri.project import init_block
+from apygis.aerotri.project import block_plan, init_block
 from tests.conftest import EXTERNAL
 
 TOLEDO = EXTERNAL / "aerial" / "toledo-drone" / "images"
@@ -31,7 +31,8 @@ def test_drone_block_from_exif_alone(tmp_path):
         report = match_block(b, MatchOptions(scheduler="sync", points_per_image=3000))
         per_image = dict(b.conn.execute("SELECT image, COUNT(*) FROM observations GROUP BY image"))
         azimuths = [im.x_azimuth_deg for im in b.images()]
-        headings = [im.heading_deg for im in b.images()]
+        # the flight direction of each image: its strip's line of centres
+        headings = [block_plan(b).headings[im.image] for im in b.images()]
     assert set(per_image) == set(range(1, 18))
     assert min(per_image.values()) >= 200
     assert report.epipolar_rms_px is not None
