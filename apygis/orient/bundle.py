@@ -991,7 +991,7 @@ def normal_deviate(T: np.ndarray, df: np.ndarray) -> np.ndarray:
 
     T = np.asarray(T, float)
     w = np.where(np.isnan(T), np.nan, 0.0)
-    for k in (1, 2):
+    for k in (1, 2, 3):
         m = (df == k) & np.isfinite(T)
         if m.any():
             with np.errstate(divide="ignore"):
@@ -1019,8 +1019,9 @@ REJECTED_NOT_LOCALISED = (
 #: from three centres on one line) cannot tell which ray is wrong. Nearly equal ones can: the
 #: largest is rejected, and should it have been the wrong one, the next round finds the other.
 LOCALISE_RATIO = 0.97
-REJECTED_TOO_FEW = "fewer than two rays left after rejections"
-REJECTED_CONTROL = "control coordinate with a standardised residual above the threshold"
+REJECTED_CONTROL = (
+    "control point whose coordinates disagree with its rays (the largest test of its point)"
+)
 
 
 @dataclass(frozen=True)
@@ -1058,12 +1059,14 @@ def robust_adjust(
     point goes per round. When the second largest test of the point is alike
     (:data:`LOCALISE_RATIO`: a two-ray point's y-parallax, an error along the
     flight in a point seen from three centres on a line), the error cannot be
-    localised and all rays of the point are rejected. A point left with fewer
-    than two rays loses the rest. The threshold starts at four times
+    localised and all rays of the point are rejected. The threshold starts at four times
     ``threshold`` and halves each round down to ``threshold``: the first
     solutions are distorted by all gross errors at once, and only the largest
-    are sure to be gross then. Control coordinates are tested once the image
-    observations pass (a wrong control point). Rounds go on until nothing more
+    are sure to be gross then. A control point's observed coordinates are
+    tested together (:func:`_control_tests`) and compete with the image
+    observations of their point: a wrong control point pulls its point away
+    from its rays, and it is the control that must go, not the rays (it
+    becomes a tie point). Rounds go on until nothing more
     is rejected; the last round is the final least-squares adjustment without
     the rejected observations. Returns the solution and the rejections in the
     order found. ``progress(done, total)`` counts rounds.
@@ -1079,18 +1082,16 @@ def robust_adjust(
         if progress is not None:
             progress(rnd, max_rounds)
         level = threshold * max(4.0 / 2 ** (rnd - 1), 1.0)
-        new = _snoop(work, sol, weight, level, rnd)
-        # control is tested once the image observations are clean (a gross error in a
-        # tie point near a control point shows in the control residuals too)
-        ctrl_new = [] if new or level > threshold else _snoop_control(work, sol, threshold, rnd)
-        if not new and not ctrl_new and level <= threshold:
+        found = _snoop(work, sol, weight, level, rnd)
+        if not found and level <= threshold:
             break
-        rejected += new + ctrl_new
-        for r in new:
-            weight[r.obs] = 0.0
+        rejected += found
         cs = work.ctrl_sigma.copy()
-        for r in ctrl_new:
-            cs[r.control] = np.inf
+        for r in found:
+            if r.obs >= 0:
+                weight[r.obs] = 0.0
+            else:
+                cs[r.control] = np.inf
         # warm start: the next round begins at this solution
         work = BundleProblem(
             calibration=pb.calibration,
@@ -1126,24 +1127,44 @@ def robust_adjust(
 
 
 def _snoop(pb: BundleProblem, sol: BundleSolution, weight, threshold, rnd) -> list[Rejection]:
-    """One round of data snooping over the image observations (see :func:`robust_adjust`)."""
+    """One round of data snooping (see :func:`robust_adjust`): per point the largest test
+    among its image observations and its control coordinates."""
     used = weight > 0
     j = pb.obs_point
     scale = robust_sigma0(sol, weight)
     w = normal_deviate(sol.test_stat / scale**2, sol.test_df)
     w = np.where(used, np.nan_to_num(w, nan=0.0), -1.0)
-    P = pb.n_points
+    rt = np.sqrt(np.nan_to_num(sol.test_stat, nan=0.0))
+    wc, tc = _control_tests(pb, sol, scale)
     out: list[Rejection] = []
+    # control coordinates beat their point's image observations when their test is larger
+    by_point_ctrl: dict[int, int] = {}
+    for c in np.nonzero(wc > threshold)[0]:
+        pt = int(pb.ctrl_point[c])
+        if pt not in by_point_ctrl or wc[c] > wc[by_point_ctrl[pt]]:
+            by_point_ctrl[pt] = int(c)
     # observations grouped by point, the largest w first
     order = np.lexsort((-w, j))
     order = order[used[order]]
     pts = j[order]
-    start = np.r_[0, np.nonzero(np.diff(pts))[0] + 1]
+    start = np.r_[0, np.nonzero(np.diff(pts))[0] + 1].astype(np.int64)
     count = np.diff(np.r_[start, len(pts)])
+    if not len(order):
+        start = count = np.zeros(0, np.int64)
     top = order[start]
-    rt = np.sqrt(np.nan_to_num(sol.test_stat, nan=0.0))
     second = np.where(count > 1, rt[order[np.minimum(start + 1, len(order) - 1)]], 0.0)
     flagged = w[top] > threshold
+    ctrl_wins = np.array([
+        int(j[o]) in by_point_ctrl and wc[by_point_ctrl[int(j[o])]] >= w[o] for o in top
+    ], bool)  # fmt: skip
+    flagged &= ~ctrl_wins
+    for c in by_point_ctrl.values():
+        pt = int(pb.ctrl_point[c])
+        g = np.searchsorted(pts, pt) if len(pts) else 0
+        if g < len(start) and g < len(pts) and pts[start[g]] == pt and not ctrl_wins[g]:
+            continue  # an image observation of this point has the larger test
+        res = tuple(float(v) for v in sol.ctrl_residuals[c])
+        out.append(Rejection(-1, int(c), res, float(wc[c]), rnd, REJECTED_CONTROL))
     # localised: the largest clearly above the second (else all rays of the point go)
     local = flagged & (count >= 3) & (second < LOCALISE_RATIO * rt[top])
     whole = flagged & ~local
@@ -1154,15 +1175,37 @@ def _snoop(pb: BundleProblem, sol: BundleSolution, weight, threshold, rnd) -> li
         reason = REJECTED_TWO_RAYS if count[g] == 2 else REJECTED_NOT_LOCALISED
         for o in order[start[g] : start[g] + count[g]]:
             out.append(_rej(sol, o, rnd, reason, w[o]))
-    # a point left with one ray loses it
-    lone = np.nonzero(local & (count == 3))[0]
-    del P
-    for g in lone:
-        members = order[start[g] : start[g] + count[g]]
-        if len(members) - 1 < 2:
-            for o in members[1:]:
-                out.append(_rej(sol, o, rnd, REJECTED_TOO_FEW, w[o]))
+    del tc
     return out
+
+
+def _control_tests(pb: BundleProblem, sol: BundleSolution, scale: float):
+    """The test of each control point's observed coordinates together, as a normal deviate.
+
+    ``T = v.T (S - Q)^-1 v`` over the observed coordinates (``S`` their a priori
+    variances, ``Q`` the cofactor of the adjusted point, ``v`` the residuals),
+    chi-square with as many degrees of freedom as coordinates are observed.
+    Returns ``(w (C,), T (C,))``; 0 for check points (nothing observed).
+    """
+    C = len(pb.ctrl_point)
+    w = np.zeros(C)
+    T = np.zeros(C)
+    if not C or not np.isfinite(sol.sigma0):
+        return w, T
+    obs = np.isfinite(pb.ctrl_sigma)
+    Q = sol.xyz_cov[pb.ctrl_point] / sol.sigma0**2
+    df = obs.sum(axis=1)
+    for c in np.nonzero(df)[0]:
+        m = obs[c]
+        Cv = np.diag(pb.ctrl_sigma[c, m] ** 2) - Q[c][np.ix_(m, m)]
+        v = sol.ctrl_residuals[c, m]
+        ev, V = np.linalg.eigh(Cv)
+        keep = ev > 1e-6 * pb.ctrl_sigma[c, m].max() ** 2
+        z = V.T @ v
+        T[c] = float(np.sum(z[keep] ** 2 / ev[keep]))
+        df[c] = int(keep.sum())
+    w = normal_deviate(T / scale**2, df)
+    return np.nan_to_num(w, nan=0.0), T
 
 
 def robust_sigma0(sol: BundleSolution, weight) -> float:
@@ -1190,23 +1233,3 @@ def robust_sigma0(sol: BundleSolution, weight) -> float:
 
 def _rej(sol, o, rnd, reason, w) -> Rejection:
     return Rejection(int(o), -1, tuple(float(v) for v in sol.residuals[o]), float(w), rnd, reason)
-
-
-def _snoop_control(pb: BundleProblem, sol: BundleSolution, threshold, rnd) -> list[Rejection]:
-    """Control coordinates: ``w = v / (sigma0 s sqrt(r))`` with ``r = 1 - Q_xx / s^2``."""
-    out: list[Rejection] = []
-    if not len(pb.ctrl_point) or not np.isfinite(sol.sigma0):
-        return out
-    s = pb.ctrl_sigma
-    obs = np.isfinite(s)
-    q = np.einsum("nii->ni", sol.xyz_cov[pb.ctrl_point]) / sol.sigma0**2
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r = 1.0 - q / s**2
-        w = np.where(obs & (r > 1e-6), sol.ctrl_residuals / (sol.sigma0 * s * np.sqrt(r)), 0.0)
-    wmax = np.abs(w).max(axis=1)
-    # one control point per round (a wrong one distorts its neighbours)
-    if len(wmax) and wmax.max() > threshold:
-        c = int(np.argmax(wmax))
-        res = tuple(float(v) for v in sol.ctrl_residuals[c])
-        out.append(Rejection(-1, c, res, float(wmax[c]), rnd, REJECTED_CONTROL))
-    return out
