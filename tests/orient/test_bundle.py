@@ -178,7 +178,7 @@ def test_a_wrong_control_point_is_rejected():
     sb = simulate_block(3, 6, points_per_image=150, seed=2)
     pb = sb.problem
     pb.ctrl_xyz[3, 2] += 1.0  # a height wrong by 1 m (sigma 3 cm)
-    sol, rej = bd.robust_adjust(pb)
+    _, rej = bd.robust_adjust(pb)
     ctrl = [r for r in rej if r.control >= 0]
     assert [r.control for r in ctrl] == [3]
     assert ctrl[0].reason == bd.REJECTED_CONTROL
@@ -235,9 +235,9 @@ def test_bad_problems_are_refused():
             xyz=pb.xyz, obs_image=pb.obs_image, obs_point=pb.obs_point + 1000,
             obs_xy=pb.obs_xy, obs_sigma=pb.obs_sigma,
         )  # fmt: skip
+    bad = pb.obs_xy.copy()
+    bad[0, 0] = np.nan
     with pytest.raises(OrientationError, match="not finite"):
-        bad = pb.obs_xy.copy()
-        bad[0, 0] = np.nan
         bd.BundleProblem(
             calibration=pb.calibration, radius_mm=pb.radius_mm, camera=pb.camera, eo=pb.eo,
             xyz=pb.xyz, obs_image=pb.obs_image, obs_point=pb.obs_point, obs_xy=bad,
@@ -264,7 +264,9 @@ def test_intersect_rays():
 def test_normal_deviate():
     from scipy.stats import norm
 
-    w = bd.normal_deviate(np.array([norm.isf(0.025) ** 2, 1e6, np.nan, 3.0]), np.array([1, 2, 2, 0]))
+    T = np.array([norm.isf(0.025) ** 2, 1e6, np.nan, 3.0])
+    w = bd.normal_deviate(T, np.array([1, 2, 2, 0]))
     assert w[0] == pytest.approx(norm.isf(0.025))
     assert w[1] == pytest.approx(1000.0, rel=0.01)
-    assert np.isnan(w[2]) and w[3] == 0.0
+    assert np.isnan(w[2])
+    assert w[3] == 0.0
