@@ -262,6 +262,105 @@ def at_match(block, scheduler, workers, points_per_image, corr_min, terrain_heig
         click.echo(f"block display: {display}")
 
 
+def _sigmas(value: str | None):
+    if value is None:
+        return None
+    parts = value.split(",")
+    try:
+        xy, z = (float(parts[0]), float(parts[1])) if len(parts) == 2 else (None, None)
+    except ValueError:
+        xy = z = None
+    if xy is None or z is None or not (xy > 0 and z > 0):
+        raise click.BadParameter(
+            f"{value!r}: expected XY,Z (metres, positive)", param_hint="--gps-sigma"
+        )
+    return (xy, z)
+
+
+@at.command("adjust")
+@click.argument("block", type=_block)
+@click.option(
+    "--calibrate",
+    default="",
+    metavar="auto|NAMES",
+    help="Self-calibration: 'auto' (the parameters the block determines) or a comma list of "
+    "c,x0,y0,k1,k2,k3,p1,p2,b1,b2. Default: the camera is fixed.",
+)
+@click.option(
+    "--gps-sigma",
+    default=None,
+    metavar="XY,Z",
+    help="Use the approximate projection centres as observations with these sigmas (m). "
+    "Default: only when the control gives no datum, with sigmas by their source.",
+)
+@click.option("--no-gps", is_flag=True, help="Never use the projection centres as observations.")
+@click.option(
+    "--threshold",
+    type=click.FloatRange(2.5, 20.0),
+    default=4.0,
+    show_default=True,
+    help="Data snooping: an observation whose test exceeds this (normal deviate) is rejected.",
+)
+@click.option("--no-robust", is_flag=True, help="One least-squares adjustment, no rejections.")
+@click.option(
+    "--restart", is_flag=True, help="Start from the block plan, not from the last adjustment."
+)
+@click.option(
+    "--subblocks",
+    is_flag=True,
+    help="Adjust the plan's subblocks as separate tasks first, then join them.",
+)
+@click.option("--scheduler", default=None, metavar="ADDRESS", help="Dask scheduler (--subblocks).")
+@click.option("--workers", type=click.IntRange(1, 1024), default=None, help="Local processes.")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
+@click.option("--report", type=_picture, default=None, metavar="FILE.txt", help="Write the "
+              "report (text) to FILE.txt.")  # fmt: skip
+@click.option("--display", type=_picture, default=None, help="The adjusted block with error "
+              "ellipses (.png or .pdf).")  # fmt: skip
+@click.option("--residuals", type=_picture, default=None, help="Every image's residual vectors "
+              "(.png or .pdf).")  # fmt: skip
+@run_guarded
+def at_adjust(block, calibrate, gps_sigma, no_gps, threshold, no_robust, restart, subblocks,
+              scheduler, workers, as_json, report, display, residuals):  # fmt: skip
+    """Bundle block adjustment of BLOCK: tie, control and check points, robust.
+
+    Prints the seed's Table 3 (images, control, points by multiplicity, sigma0 in um
+    and px, image and object rms) with every image's exterior orientation and the
+    rejected observations. Results are stored in BLOCK ('at export').
+    """
+    from apygis.aerotri.adjust import AdjustOptions, adjust_block
+    from apygis.aerotri.adjust_report import adjust_display, adjust_text, residual_display
+    from apygis.fileio import atomic_write
+
+    for pic in (display, residuals):
+        _check_picture(pic)
+    cal: tuple[str, ...] | str = ()
+    if calibrate == "auto":
+        cal = "auto"
+    elif calibrate:
+        cal = tuple(x.strip() for x in calibrate.split(",") if x.strip())
+    gps = None if no_gps else (_sigmas(gps_sigma) or "auto")
+    opt = AdjustOptions(
+        robust=not no_robust, threshold=threshold, calibrate=cal, gps=gps, restart=restart,
+        subblocks=subblocks, scheduler=scheduler, workers=workers,
+    )  # fmt: skip
+    with _open(block) as b:
+        with _bar(f"adjusting {block}") as bar:
+            r = adjust_block(b, opt, progress=_advance(bar))
+        d = r.to_dict()
+        text = adjust_text(d)
+        if report is not None:
+            atomic_write(report, adjust_text(d, max_rows=10**9))
+        if display is not None:
+            adjust_display(b, display)
+        if residuals is not None:
+            residual_display(b, residuals)
+    click.echo(json.dumps(d, indent=1) if as_json else text, nl=as_json)
+    for path, what in ((report, "report"), (display, "block display"), (residuals, "residuals")):
+        if path is not None:
+            click.echo(f"{what}: {path}", err=as_json)
+
+
 @at.command("export")
 @click.argument("block", type=_block)
 @click.option(

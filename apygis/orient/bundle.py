@@ -1052,8 +1052,13 @@ def robust_adjust(
 
     Each round adjusts (warm-started from the round before) and tests every
     observation: ``w`` is its test quantity ``T`` (both coordinates together,
-    exact redundancy, scaled by :func:`robust_sigma0`) as a normal deviate
-    (:func:`normal_deviate`). In every point, the one observation with the
+    exact redundancy) scaled by the variance factor, as a normal deviate
+    (:func:`normal_deviate`). The variance factor is robust
+    (:func:`robust_sigma0`) while the threshold is still above ``threshold``
+    (gross errors inflate the least-squares ``sigma0``), then the adjustment's
+    own ``sigma0`` (Pope's tau test): real measurement errors have heavier
+    tails than a normal distribution, and the robust scale, which ignores the
+    tails, would reject good measurements among them. In every point, the one observation with the
     largest ``w`` is rejected when ``w`` exceeds the round's threshold: a gross
     error spreads into the other rays of its point, so only the worst of a
     point goes per round. When the second largest test of the point is alike
@@ -1082,7 +1087,7 @@ def robust_adjust(
         if progress is not None:
             progress(rnd, max_rounds)
         level = threshold * max(4.0 / 2 ** (rnd - 1), 1.0)
-        found = _snoop(work, sol, weight, level, rnd)
+        found = _snoop(work, sol, weight, level, rnd, robust_scale=level > threshold)
         if not found and level <= threshold:
             break
         rejected += found
@@ -1126,12 +1131,14 @@ def robust_adjust(
     return sol, rejected
 
 
-def _snoop(pb: BundleProblem, sol: BundleSolution, weight, threshold, rnd) -> list[Rejection]:
+def _snoop(
+    pb: BundleProblem, sol: BundleSolution, weight, threshold, rnd, robust_scale: bool
+) -> list[Rejection]:
     """One round of data snooping (see :func:`robust_adjust`): per point the largest test
     among its image observations and its control coordinates."""
     used = weight > 0
     j = pb.obs_point
-    scale = robust_sigma0(sol, weight)
+    scale = robust_sigma0(sol, weight) if robust_scale else sol.sigma0
     w = normal_deviate(sol.test_stat / scale**2, sol.test_df)
     w = np.where(used, np.nan_to_num(w, nan=0.0), -1.0)
     rt = np.sqrt(np.nan_to_num(sol.test_stat, nan=0.0))

@@ -1,0 +1,838 @@
+"""The bundle block adjustment of a block (``apygis at adjust``).
+
+PHODIS AT relied on external programs (PAT-B, BLUH); apygis adjusts itself
+(:mod:`apygis.orient.bundle`) and also exchanges with them
+(:mod:`apygis.aerotri.exchange`).
+
+What goes in
+------------
+* **Image observations**: every measurement of the block (tie points from
+  ``at match``, control and new points from ``at gcp``) in photo millimetres
+  through the image's interior orientation, corrected for the camera's radial
+  distortion table, weighted by its own precision: the LSM ``sigma_px``
+  (floored at ``min_sigma_px``; measurements without one get
+  ``default_sigma_px``), times the image's pixel size.
+* **Control points** as weighted observations of their coordinates: ``full``
+  (X, Y, Z), ``planimetric`` (X, Y), ``height`` (Z), with the sigmas of the
+  control file; ``check`` points are adjusted as tie points and compared with
+  their given coordinates afterwards.
+* **Projection centres** (GPS) as observations with sigmas: ``gps="auto"``
+  uses them only when the control gives no datum (the positions of EXIF: 5 m
+  in plan, 10 m in height; of an image list: 1 m and 2 m), ``gps=(sxy, sz)``
+  always, ``gps=None`` never.
+* **Self-calibration** (``calibrate``): fixed by default. A list of
+  parameter names (:data:`~apygis.orient.bundle.CALIBRATION_PARAMETERS`) frees
+  them; ``"auto"`` frees ``c, x0, y0, k1, k2, p1, p2`` (and ``b1, b2`` for
+  film) and then fixes, one at a time, the one most correlated (``|r| >
+  0.9``) with an orientation element or another calibration parameter, until
+  the block determines all that remain.
+
+Approximate values
+------------------
+From the last adjustment of the block where it covers every image; otherwise
+from the block plan: the approximate projection centres of the image list
+(or EXIF) with vertical photos (``omega = phi = 0``, ``kappa = 90 deg - az``
+with ``az`` the azimuth of the photo x axis found by matching, or the flight
+direction); images without an approximate centre are placed by a chain of
+relative orientations (:func:`_chain`), scaled and placed on the control
+by an absolute orientation. Points are intersected from those orientations.
+
+Robust estimation
+-----------------
+:func:`apygis.orient.bundle.robust_adjust` (data snooping with a robust
+variance factor, threshold ``threshold``); every rejection is stored with its
+residual, test value and reason. ``robust=False`` adjusts all observations
+once.
+
+Subblocks
+---------
+``subblocks=True`` adjusts each subblock of the block plan as an independent
+task (:class:`apygis.tasks.Runner`: local processes or a Dask cluster), each
+on its own control or centres, then joins them: the subblocks' orientations
+and points are the approximate values of one adjustment of the whole block,
+tied through the common strips' points.
+
+What comes out
+--------------
+Stored in the block (schema in ``docs/aerotri.md``): the run in
+``adjustments`` (options and the report), the exterior orientations with
+their standard deviations, the adjusted points with theirs, and every
+observation's residual (pixels), test value and verdict. The report
+(:class:`AdjustReport`) is the seed's Table 3 and more.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from apygis.aerotri.block import Block, BlockError
+from apygis.aerotri.camera import Camera, PixelTransform
+from apygis.orient.bundle import (
+    CALIBRATION_PARAMETERS,
+    SNOOPING_THRESHOLD,
+    BundleProblem,
+    BundleSolution,
+    Rejection,
+    adjust,
+    intersect_rays,
+    robust_adjust,
+)
+from apygis.orient.rotation import rotation_matrix
+
+__all__ = [
+    "AdjustOptions",
+    "AdjustReport",
+    "adjust_block",
+    "load_problem",
+]
+
+log = logging.getLogger(__name__)
+
+#: Default sigmas (m, plan and height) of projection centres, by the source of the position.
+GPS_SIGMAS = {"exif": (5.0, 10.0), "list": (1.0, 2.0)}
+
+#: Parameters that ``calibrate="auto"`` frees (film cameras also b1, b2).
+AUTO_CALIBRATION = ("c", "x0", "y0", "k1", "k2", "p1", "p2")
+
+#: Calibration parameters correlated above this with another unknown are not determined.
+CORRELATION_LIMIT = 0.9
+
+
+@dataclass
+class AdjustOptions:
+    """Options of :func:`adjust_block` (module docstring)."""
+
+    robust: bool = True
+    threshold: float = SNOOPING_THRESHOLD
+    calibrate: tuple[str, ...] | str = ()
+    gps: tuple[float, float] | str | None = "auto"
+    min_sigma_px: float = 0.02
+    default_sigma_px: float = 0.3
+    max_iter: int = 30
+    restart: bool = False
+    subblocks: bool = False
+    scheduler: str | None = None
+    workers: int | None = None
+
+    def to_dict(self) -> dict:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(self).items()}
+
+
+@dataclass
+class Loaded:
+    """A block's adjustment problem and the names behind its indices."""
+
+    problem: BundleProblem
+    images: list[int]  # image numbers, in the problem's order
+    point_ids: list[int]  # point ids (database), in the problem's order
+    point_names: list[str]
+    point_kinds: list[str]
+    cameras: list[int]  # camera ids, in the problem's order
+    transforms: list[PixelTransform]  # per image
+    check: list[int]  # problem indices of check points
+    check_xyz: np.ndarray  # their given coordinates
+    control_index: list[int]  # problem point index of each control entry
+    gps_used: bool
+    notes: list[str] = field(default_factory=list)
+    sigma_ref_mm: float = 0.0  # median a priori sigma of the image observations
+
+
+@dataclass
+class AdjustReport:
+    """What :func:`adjust_block` did: the seed's Table 3 and more (``to_dict`` for JSON)."""
+
+    adjustment: int
+    images: int
+    cameras: int
+    control: dict[str, int]
+    multiplicity: dict[int, int]
+    observations: int
+    rejected: int
+    sigma0: float
+    sigma0_um: float
+    sigma0_px: float
+    image_rms_um: tuple[float, float]
+    object_rms_m: tuple[float, float, float] | None
+    object_rms_predicted_m: tuple[float, float, float] | None
+    redundancy: int
+    iterations: int
+    seconds: float
+    gps_used: bool
+    calibration: list[dict]
+    rejections: list[dict]
+    control_residuals: list[dict]
+    check_residuals: list[dict]
+    exterior: list[dict]
+    notes: list[str]
+    subblocks: list[dict] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dict(vars(self))
+        d["multiplicity"] = {str(k): v for k, v in sorted(self.multiplicity.items())}
+        return _jsonable(d)
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+# --- loading the problem -------------------------------------------------------------------
+
+
+def _camera_radius(cam: Camera) -> float:
+    """The normalising radius of the additional parameters: half the format's diagonal."""
+    if cam.kind == "film":
+        f = cam.fiducial_array
+        return float(np.max(np.hypot(f[:, 0], f[:, 1])))
+    if cam.sensor_px is None or cam.pixel_um is None:
+        raise BlockError(f"camera {cam.name!r}: a digital camera needs pixel_um and sensor_px")
+    return 0.5 * math.hypot(*cam.sensor_px) * cam.pixel_um / 1000.0
+
+
+def load_problem(block: Block, options: AdjustOptions | None = None) -> Loaded:
+    """The block's bundle problem with approximate values (module docstring)."""
+    opt = options or AdjustOptions()
+    cams = block.cameras()
+    interior = block.interior()
+    images = {im.image: im for im in block.images()}
+    rows = block.conn.execute(
+        "SELECT o.point, o.image, o.x_mm, o.y_mm, o.sigma_px, p.kind "
+        "FROM observations o JOIN points p ON p.id = o.point ORDER BY o.point, o.image"
+    ).fetchall()
+    if not rows:
+        raise BlockError(f"{block.path}: no observations to adjust (run 'apygis at match')")
+    pts_info = {
+        pid: (name, kind, X, Y, Z, sxy, sz)
+        for pid, name, kind, X, Y, Z, sxy, sz in block.conn.execute(
+            "SELECT id, name, kind, X, Y, Z, sigma_xy_m, sigma_z_m FROM points"
+        )
+    }
+    obs_pt = np.array([r[0] for r in rows], np.int64)
+    obs_img = np.array([r[1] for r in rows], np.int64)
+    missing = sorted({int(i) for i in obs_img} - set(interior))
+    if missing:
+        raise BlockError(
+            f"{block.path}: images {missing[:10]} have observations but no interior orientation"
+        )
+    kinds = np.array([r[5] for r in rows])
+    # points to adjust: two rays, or control with observed coordinates and one ray
+    rays = {}
+    for p in obs_pt:
+        rays[int(p)] = rays.get(int(p), 0) + 1
+    control_kinds = ("full", "planimetric", "height")
+    keep_pt = {
+        p
+        for p, n in rays.items()
+        if n >= 2 or (pts_info[p][1] in control_kinds and _has_coords(pts_info[p]))
+    }
+    sel = np.array([int(p) in keep_pt for p in obs_pt])
+    dropped_single = len(set(rays) - keep_pt)
+    rows = [r for r, s in zip(rows, sel, strict=True) if s]
+    obs_pt, obs_img, kinds = obs_pt[sel], obs_img[sel], kinds[sel]
+    image_list = sorted({int(i) for i in obs_img})
+    img_index = {n: k for k, n in enumerate(image_list)}
+    point_ids = sorted(keep_pt)
+    pt_index = {p: k for k, p in enumerate(point_ids)}
+    cam_list = sorted({images[n].camera for n in image_list})
+    cam_index = {c: k for k, c in enumerate(cam_list)}
+    transforms = [PixelTransform.from_list(interior[n]["transform"]) for n in image_list]
+    # observations: undistorted photo mm, sigma mm
+    xy = np.array([[r[2], r[3]] for r in rows], float)
+    sig_px = np.array([np.nan if r[4] is None else r[4] for r in rows], float)
+    sig_px = np.where(np.isfinite(sig_px), np.maximum(sig_px, opt.min_sigma_px),
+                      opt.default_sigma_px)  # fmt: skip
+    oi = np.array([img_index[int(i)] for i in obs_img], np.int64)
+    op = np.array([pt_index[int(p)] for p in obs_pt], np.int64)
+    scale = np.array([t.pixel_mm for t in transforms])
+    for n in image_list:
+        cam = cams[images[n].camera]
+        m = oi == img_index[n]
+        xy[m] = cam.undistort(xy[m])
+    sig_mm = sig_px * scale[oi]
+    # cameras
+    K = len(cam_list)
+    calib = np.zeros((K, len(CALIBRATION_PARAMETERS)))
+    radius = np.zeros(K)
+    for c, k in cam_index.items():
+        cam = cams[c]
+        calib[k, :3] = (cam.focal_mm, cam.x0_mm, cam.y0_mm)
+        radius[k] = _camera_radius(cam)
+    free = _free_mask(opt.calibrate, [cams[c] for c in cam_list])
+    # control
+    ctrl_pt, ctrl_xyz, ctrl_sig, check, check_xyz = [], [], [], [], []
+    for p in point_ids:
+        _, kind, X, Y, Z, sxy, sz = pts_info[p]
+        if kind in control_kinds:
+            s = [np.inf, np.inf, np.inf]
+            if kind in ("full", "planimetric"):
+                s[0] = s[1] = float(sxy if sxy is not None else 0.05)
+            if kind in ("full", "height"):
+                s[2] = float(sz if sz is not None else 0.05)
+            v = [0.0 if X is None else X, 0.0 if Y is None else Y, 0.0 if Z is None else Z]
+            ctrl_pt.append(pt_index[p])
+            ctrl_xyz.append(v)
+            ctrl_sig.append(s)
+        elif kind == "check" and None not in (X, Y, Z):
+            check.append(pt_index[p])
+            check_xyz.append([X, Y, Z])
+    notes = []
+    if dropped_single:
+        notes.append(f"{dropped_single} points with a single ray are not adjusted")
+    # datum: the control, else the centres
+    full = sum(1 for s in ctrl_sig if np.isfinite(s).all())
+    plan_c = sum(1 for s in ctrl_sig if np.isfinite(s[0]))
+    height_c = sum(1 for s in ctrl_sig if np.isfinite(s[2]))
+    control_datum = plan_c >= 2 and height_c >= 3 and (full >= 1 or plan_c >= 3)
+    gps_image, gps_xyz, gps_sig = [], [], []
+    use_gps = opt.gps is not None and (opt.gps != "auto" or not control_datum)
+    if use_gps:
+        for n in image_list:
+            im = images[n]
+            if None in (im.X, im.Y, im.Z):
+                continue
+            if isinstance(opt.gps, tuple):
+                sxy, sz = opt.gps
+            else:
+                sxy, sz = GPS_SIGMAS.get(im.position_source, GPS_SIGMAS["list"])
+            gps_image.append(img_index[n])
+            gps_xyz.append([im.X, im.Y, im.Z])
+            gps_sig.append([sxy, sxy, sz])
+        if gps_image and opt.gps == "auto":
+            notes.append(
+                f"the control gives no datum: {len(gps_image)} approximate projection centres "
+                "are used as observations (sigmas by their source; --gps-sigma to set them)"
+            )
+    if not control_datum and not gps_image:
+        raise BlockError(
+            f"{block.path}: the block has no datum: measure control points in the images "
+            "('apygis at gcp': at least two in plan and three in height) or give projection "
+            "centres (--gps-sigma)"
+        )
+    # approximate values
+    eo0 = _approximate_eo(block, images, image_list, cams, opt)
+    P = len(point_ids)
+    R = rotation_matrix(eo0[:, 3], eo0[:, 4], eo0[:, 5])
+    k_obs = np.array([cam_index[images[n].camera] for n in image_list], np.int64)[oi]
+    d = np.einsum("nij,nj->ni", R[oi], np.c_[xy - calib[k_obs, 1:3], -calib[k_obs, 0]])
+    xyz0, ok = intersect_rays(eo0[oi, :3], d, op, P)
+    # control with given coordinates: start there
+    for k, v, s in zip(ctrl_pt, ctrl_xyz, ctrl_sig, strict=True):
+        for a in range(3):
+            if np.isfinite(s[a]):
+                xyz0[k, a] = v[a]
+        ok[k] = ok[k] or np.isfinite(s).all()
+    # points that did not intersect (or lie behind a camera): on the mean terrain
+    tz = _terrain(block)
+    bad = ~ok | _behind(xyz0, eo0, R, oi, op)
+    if bad.any():
+        xyz0[bad] = _on_terrain(eo0, R, oi, op, d, bad, tz)
+    problem = BundleProblem(
+        calibration=calib,
+        radius_mm=radius,
+        camera=np.array([cam_index[images[n].camera] for n in image_list], np.int64),
+        eo=eo0,
+        xyz=xyz0,
+        obs_image=oi,
+        obs_point=op,
+        obs_xy=xy,
+        obs_sigma=sig_mm,
+        free=free,
+        ctrl_point=np.array(ctrl_pt, np.int64),
+        ctrl_xyz=np.array(ctrl_xyz, float).reshape(-1, 3),
+        ctrl_sigma=np.array(ctrl_sig, float).reshape(-1, 3),
+        gps_image=np.array(gps_image, np.int64),
+        gps_xyz=np.array(gps_xyz, float).reshape(-1, 3),
+        gps_sigma=np.array(gps_sig, float).reshape(-1, 3),
+    )
+    return Loaded(
+        problem=problem,
+        images=image_list,
+        point_ids=point_ids,
+        point_names=[pts_info[p][0] for p in point_ids],
+        point_kinds=[pts_info[p][1] for p in point_ids],
+        cameras=cam_list,
+        transforms=transforms,
+        check=check,
+        check_xyz=np.array(check_xyz, float).reshape(-1, 3),
+        control_index=ctrl_pt,
+        gps_used=bool(gps_image),
+        notes=notes,
+        sigma_ref_mm=float(np.median(sig_mm)),
+    )
+
+
+def _has_coords(info) -> bool:
+    _, kind, X, Y, Z, _, _ = info
+    if kind == "height":
+        return Z is not None
+    if kind == "planimetric":
+        return X is not None and Y is not None
+    return None not in (X, Y, Z)
+
+
+def _free_mask(calibrate, cams: list[Camera]) -> np.ndarray:
+    mask = np.zeros((len(cams), len(CALIBRATION_PARAMETERS)), bool)
+    if not calibrate:
+        return mask
+    for k, cam in enumerate(cams):
+        if calibrate == "auto":
+            names = list(AUTO_CALIBRATION) + (["b1", "b2"] if cam.kind == "film" else [])
+        else:
+            names = list(calibrate)
+        for n in names:
+            if n not in CALIBRATION_PARAMETERS:
+                raise BlockError(
+                    f"calibration parameter {n!r} is not one of {', '.join(CALIBRATION_PARAMETERS)}"
+                )
+            mask[k, CALIBRATION_PARAMETERS.index(n)] = True
+    return mask
+
+
+def _terrain(block: Block) -> float:
+    from apygis.aerotri.project import terrain_height
+
+    try:
+        return terrain_height(block)
+    except BlockError:
+        return 0.0
+
+
+def _approximate_eo(block: Block, images, image_list, cams, opt: AdjustOptions) -> np.ndarray:
+    """Approximate exterior orientations (module docstring), ``(M, 6)``."""
+    M = len(image_list)
+    eo = np.full((M, 6), np.nan)
+    if not opt.restart:
+        prev = {
+            r[0]: r[1:]
+            for r in block.conn.execute(
+                "SELECT image, X, Y, Z, omega, phi, kappa FROM exterior"
+            ).fetchall()
+        }
+        if prev and all(n in prev for n in image_list):
+            return np.array([prev[n] for n in image_list], float)
+    from apygis.aerotri.project import block_plan
+
+    try:
+        bplan = block_plan(block)
+        headings = bplan.headings
+    except (BlockError, ValueError):
+        headings = {}
+    tz = _terrain(block)
+    for k, n in enumerate(image_list):
+        im = images[n]
+        az = im.x_azimuth_deg if im.x_azimuth_deg is not None else headings.get(n, im.heading_deg)
+        if None in (im.X, im.Y) or az is None:
+            continue
+        Z = im.Z
+        if Z is None:
+            cam = cams[im.camera]
+            Z = tz + cam.focal_mm * 10.0  # unknown flying height: 1:10 000
+        eo[k] = (im.X, im.Y, Z, 0.0, 0.0, math.radians(90.0 - az))
+    if np.isnan(eo).any():
+        missing = [image_list[k] for k in np.nonzero(np.isnan(eo).any(axis=1))[0]]
+        raise BlockError(
+            f"{block.path}: images {missing[:10]} have no approximate projection centre; "
+            "give X, Y, Z in the image list (a block without any is oriented by a chain of "
+            "relative orientations: see 'apygis at adjust --help')"
+        )
+    return eo
+
+
+def _behind(xyz, eo, R, oi, op) -> np.ndarray:
+    q = np.einsum("nk,nkl->nl", xyz[op] - eo[oi, :3], R[oi])
+    out = np.zeros(len(xyz), bool)
+    np.logical_or.at(out, op, q[:, 2] >= 0)
+    return out
+
+
+def _on_terrain(eo, R, oi, op, d, bad, tz) -> np.ndarray:
+    """Points on the plane ``Z = tz`` along the first ray of each."""
+    first = {}
+    for k, p in enumerate(op):
+        if bad[p] and p not in first:
+            first[int(p)] = k
+    out = np.zeros((int(bad.sum()), 3))
+    idx = np.nonzero(bad)[0]
+    for j, p in enumerate(idx):
+        k = first.get(int(p))
+        if k is None:
+            continue
+        C, v = eo[oi[k], :3], d[k]
+        t = (tz - C[2]) / v[2] if v[2] != 0 else 0.0
+        out[j] = C + t * v
+    return out
+
+
+# --- the adjustment ------------------------------------------------------------------------
+
+
+def adjust_block(block: Block, options: AdjustOptions | None = None, *, progress=None):
+    """Adjust the block (module docstring); returns an :class:`AdjustReport`.
+
+    ``progress(done, total)`` (:mod:`apygis.progress`) counts the rounds of
+    data snooping (and calibration selection).
+    """
+    from apygis.progress import STEPS, phase
+
+    opt = options or AdjustOptions()
+    t0 = time.perf_counter()
+    started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    with block.conn:
+        cur = block.conn.execute(
+            "INSERT INTO adjustments (started, options) VALUES (?, ?)",
+            (started, json.dumps(opt.to_dict())),
+        )
+    adj_id = int(cur.lastrowid or 0)
+    run = block.start_run("adjust", opt.to_dict())
+    try:
+        ld = load_problem(block, opt)
+        sub_reports: list[dict] = []
+        if opt.subblocks:
+            sub_reports = _subblock_start(block, ld, opt)
+        pb = ld.problem
+        steps = 2 if opt.calibrate == "auto" else 1
+        sol, rej = _solve(pb, opt, phase(progress, 0, steps))
+        if opt.calibrate == "auto":
+            sol, rej, dropped = _select_calibration(ld, opt, sol, rej, phase(progress, 1, steps))
+            ld.notes += dropped
+        report = _report(block, ld, sol, rej, adj_id, time.perf_counter() - t0, sub_reports)
+        _store(block, ld, sol, rej, adj_id, report)
+        if progress is not None:
+            progress(STEPS, STEPS)
+    except BaseException as exc:
+        block.finish_run(run, "failed" if not isinstance(exc, KeyboardInterrupt)
+                         else "interrupted", {"error": str(exc)})  # fmt: skip
+        with block.conn:
+            block.conn.execute("DELETE FROM adjustments WHERE id = ?", (adj_id,))
+        raise
+    block.finish_run(run, "done", {"adjustment": adj_id, "sigma0": report.sigma0})
+    return report
+
+
+def _solve(pb: BundleProblem, opt: AdjustOptions, progress):
+    if opt.robust:
+        return robust_adjust(pb, threshold=opt.threshold, max_iter=opt.max_iter,
+                             progress=progress)  # fmt: skip
+    sol = adjust(pb, max_iter=opt.max_iter, progress=progress)
+    return sol, []
+
+
+def _select_calibration(ld: Loaded, opt: AdjustOptions, sol: BundleSolution, rej, progress):
+    """Fix, one at a time, the free calibration parameter most correlated with another unknown
+    until every remaining one is below :data:`CORRELATION_LIMIT`; returns notes."""
+    pb = ld.problem
+    notes = []
+    weight = np.ones(len(pb.obs_image))
+    for r in rej:
+        if r.obs >= 0:
+            weight[r.obs] = 0.0
+    rounds = int(pb.free.sum()) + 1
+    for k in range(rounds):
+        if progress is not None:
+            progress(k, rounds)
+        names = sol.calibration_names
+        if not names:
+            break
+        corr = np.abs(sol.calibration_corr.copy())
+        np.fill_diagonal(corr, 0.0)
+        worst = np.maximum(corr.max(axis=1) if len(names) > 1 else 0.0, sol.calibration_eo_corr)
+        j = int(np.argmax(worst))
+        if not worst[j] > CORRELATION_LIMIT:
+            break
+        cam, par = names[j]
+        other = (
+            "an orientation element"
+            if sol.calibration_eo_corr[j] >= (corr[j].max() if len(names) > 1 else 0)
+            else names[int(np.argmax(corr[j]))][1]
+        )
+        notes.append(
+            f"camera {ld.cameras[cam]}: {par} is not determined by this block (correlation "
+            f"{worst[j]:.2f} with {other}); fixed"
+        )
+        pb.free[cam, CALIBRATION_PARAMETERS.index(par)] = False
+        pb.calibration[cam, CALIBRATION_PARAMETERS.index(par)] = _initial(ld, cam, par)
+        pb.eo, pb.xyz = sol.eo.copy(), sol.xyz.copy()
+        sol = adjust(pb, weight=weight, max_iter=opt.max_iter)
+    if progress is not None:
+        progress(rounds, rounds)
+    return sol, rej, notes
+
+
+def _initial(ld: Loaded, cam: int, par: str) -> float:
+    """The camera file's value of a calibration parameter (0 for the additional ones)."""
+    i = CALIBRATION_PARAMETERS.index(par)
+    return float(ld.problem.calibration[cam, i]) if i < 3 else 0.0
+
+
+def _subblock_start(block: Block, ld: Loaded, opt: AdjustOptions) -> list[dict]:
+    """Adjust each subblock as an independent task, and start the whole block from them."""
+    from apygis.tasks import Runner
+
+    subblocks = block.subblocks()
+    if not subblocks:
+        raise BlockError(
+            f"{block.path}: the block has no subblocks ('apygis at plan --subblock-strips N')"
+        )
+    strip_of = {im.image: im.strip for im in block.images()}
+    pb = ld.problem
+    tasks = []
+    members = []
+    for k, strips in enumerate(subblocks, 1):
+        imgs = [i for i, n in enumerate(ld.images) if strip_of.get(n) in set(strips)]
+        sub = _restrict(pb, imgs)
+        if sub is None:
+            continue
+        members.append((k, imgs, sub[1], sub[2]))
+        tasks.append((k, (sub[0], opt.threshold, opt.max_iter, opt.robust)))
+    out = []
+    eo_sum = np.zeros_like(pb.eo)
+    eo_n = np.zeros(len(pb.eo))
+    xyz_sum = np.zeros_like(pb.xyz)
+    xyz_n = np.zeros(len(pb.xyz))
+    results = {}
+    with Runner(opt.scheduler, opt.workers) as runner:
+        for k, res in runner.run(_task_subblock, tasks):
+            results[k] = res
+    for k, imgs, pts, _ in members:
+        res = results.get(k)
+        if res is None or "error" in res:
+            out.append({"subblock": k, "images": len(imgs), "error": (res or {}).get("error")})
+            continue
+        eo_sum[imgs] += res["eo"]
+        eo_n[imgs] += 1
+        xyz_sum[pts] += res["xyz"]
+        xyz_n[pts] += 1
+        out.append({"subblock": k, "images": len(imgs), "points": len(pts),
+                    "sigma0": res["sigma0"], "rejected": res["rejected"]})  # fmt: skip
+    have = eo_n > 0
+    pb.eo[have] = eo_sum[have] / eo_n[have, None]
+    havep = xyz_n > 0
+    pb.xyz[havep] = xyz_sum[havep] / xyz_n[havep, None]
+    return out
+
+
+def _restrict(pb: BundleProblem, imgs: list[int]):
+    """The sub-problem of images ``imgs``: points with two rays there (or control)."""
+    img_set = np.zeros(pb.n_images, bool)
+    img_set[imgs] = True
+    m = img_set[pb.obs_image]
+    rays = np.bincount(pb.obs_point[m], minlength=pb.n_points)
+    ctrl = np.zeros(pb.n_points, bool)
+    ctrl[pb.ctrl_point[np.isfinite(pb.ctrl_sigma).any(axis=1)]] = True
+    keep_pt = (rays >= 2) | (ctrl & (rays >= 1))
+    m &= keep_pt[pb.obs_point]
+    if not m.any():
+        return None
+    pts = np.nonzero(keep_pt)[0]
+    pidx = np.full(pb.n_points, -1)
+    pidx[pts] = np.arange(len(pts))
+    iidx = np.full(pb.n_images, -1)
+    iidx[imgs] = np.arange(len(imgs))
+    cm = keep_pt[pb.ctrl_point]
+    gm = img_set[pb.gps_image]
+    sub = BundleProblem(
+        calibration=pb.calibration, radius_mm=pb.radius_mm, camera=pb.camera[imgs],
+        eo=pb.eo[imgs], xyz=pb.xyz[pts], obs_image=iidx[pb.obs_image[m]],
+        obs_point=pidx[pb.obs_point[m]], obs_xy=pb.obs_xy[m], obs_sigma=pb.obs_sigma[m],
+        free=np.zeros_like(pb.free), ctrl_point=pidx[pb.ctrl_point[cm]],
+        ctrl_xyz=pb.ctrl_xyz[cm], ctrl_sigma=pb.ctrl_sigma[cm],
+        gps_image=iidx[pb.gps_image[gm]], gps_xyz=pb.gps_xyz[gm], gps_sigma=pb.gps_sigma[gm],
+    )  # fmt: skip
+    return sub, pts, m
+
+
+def _task_subblock(problem: BundleProblem, threshold: float, max_iter: int, robust: bool):
+    from apygis.errors import ApygisError
+
+    try:
+        if robust:
+            sol, rej = robust_adjust(problem, threshold=threshold, max_iter=max_iter)
+        else:
+            sol, rej = adjust(problem, max_iter=max_iter, covariance=False), []
+    except ApygisError as exc:
+        return {"error": str(exc)}
+    return {"eo": sol.eo, "xyz": sol.xyz, "sigma0": sol.sigma0, "rejected": len(rej)}
+
+
+# --- the report and the block's tables -----------------------------------------------------
+
+
+def _residual_px(ld: Loaded, sol: BundleSolution) -> np.ndarray:
+    """Residuals in pixels ``(N, 2)`` (col, row) through each image's linear transform."""
+    pb = ld.problem
+    out = np.empty_like(sol.residuals)
+    for k, t in enumerate(ld.transforms):
+        m = pb.obs_image == k
+        if m.any():
+            Ainv = np.linalg.inv(t.matrix[:2, :2])
+            out[m] = sol.residuals[m] @ Ainv.T
+    return out
+
+
+def _report(block, ld: Loaded, sol: BundleSolution, rej: list[Rejection], adj_id: int,
+            seconds: float, sub_reports) -> AdjustReport:  # fmt: skip
+    pb = ld.problem
+    weight = np.ones(len(pb.obs_image))
+    ctrl_off = set()
+    for r in rej:
+        if r.obs >= 0:
+            weight[r.obs] = 0.0
+        else:
+            ctrl_off.add(r.control)
+    used = weight > 0
+    rays = np.bincount(pb.obs_point[used], minlength=pb.n_points)
+    mult: dict[int, int] = {}
+    for n in rays[rays >= 1]:
+        mult[int(n)] = mult.get(int(n), 0) + 1
+    res_um = sol.residuals[used] * 1000.0
+    image_rms = tuple(float(np.sqrt(np.mean(res_um[:, a] ** 2))) for a in range(2))
+    px = float(np.median([t.pixel_mm for t in ld.transforms]))
+    kinds = {"full": 0, "planimetric": 0, "height": 0, "check": len(ld.check)}
+    for k in ld.control_index:
+        kinds[ld.point_kinds[k]] += 1
+    obj_rms = obj_pred = None
+    check_res = []
+    if ld.check:
+        ci = np.array(ld.check)
+        e = sol.xyz[ci] - ld.check_xyz
+        obj_rms = tuple(float(v) for v in np.sqrt(np.mean(e**2, axis=0)))
+        obj_pred = tuple(float(v) for v in np.sqrt(np.nanmean(sol.xyz_std[ci] ** 2, axis=0)))
+        for j, k in enumerate(ci):
+            check_res.append({
+                "point": ld.point_names[k], "dX": e[j, 0], "dY": e[j, 1], "dZ": e[j, 2],
+                "sX": sol.xyz_std[k, 0], "sY": sol.xyz_std[k, 1], "sZ": sol.xyz_std[k, 2],
+                "rays": int(rays[k]),
+            })  # fmt: skip
+    ctrl_res = []
+    for c, k in enumerate(ld.control_index):
+        v = sol.ctrl_residuals[c]
+        s = pb.ctrl_sigma[c]
+        ctrl_res.append({
+            "point": ld.point_names[k], "kind": ld.point_kinds[k],
+            "vX": v[0] if np.isfinite(s[0]) else None, "vY": v[1] if np.isfinite(s[1]) else None,
+            "vZ": v[2] if np.isfinite(s[2]) else None, "rays": int(rays[k]),
+            "rejected": c in ctrl_off,
+        })  # fmt: skip
+    rejections = []
+    for r in rej:
+        if r.obs >= 0:
+            o = r.obs
+            k = int(pb.obs_image[o])
+            v_px = np.asarray(r.residual) @ np.linalg.inv(ld.transforms[k].matrix[:2, :2]).T
+            rejections.append({
+                "point": ld.point_names[int(pb.obs_point[o])], "image": ld.images[k],
+                "residual_px": [float(v_px[0]), float(v_px[1])], "w": r.w, "round": r.round,
+                "reason": r.reason,
+            })  # fmt: skip
+        else:
+            k = ld.control_index[r.control]
+            rejections.append({
+                "point": ld.point_names[k], "image": None, "residual_m": list(r.residual),
+                "w": r.w, "round": r.round, "reason": r.reason,
+            })  # fmt: skip
+    exterior = []
+    for k, n in enumerate(ld.images):
+        e, s = sol.eo[k], sol.eo_std[k]
+        exterior.append({
+            "image": n, "X": e[0], "Y": e[1], "Z": e[2], "omega_rad": e[3], "phi_rad": e[4],
+            "kappa_rad": e[5], "sX": s[0], "sY": s[1], "sZ": s[2], "somega_rad": s[3],
+            "sphi_rad": s[4], "skappa_rad": s[5],
+        })  # fmt: skip
+    calibration = []
+    for j, (cam, par) in enumerate(sol.calibration_names):
+        i = CALIBRATION_PARAMETERS.index(par)
+        calibration.append({
+            "camera": ld.cameras[cam], "parameter": par, "value": sol.calibration[cam, i],
+            "std": sol.calibration_std[cam, i], "initial": pb.calibration[cam, i],
+            "max_corr_orientation": sol.calibration_eo_corr[j],
+            "corr": {n2[1]: sol.calibration_corr[j, j2]
+                     for j2, n2 in enumerate(sol.calibration_names) if j2 != j},
+        })  # fmt: skip
+    s0 = sol.sigma0
+    return AdjustReport(
+        adjustment=adj_id,
+        images=len(ld.images),
+        cameras=len(ld.cameras),
+        control=kinds,
+        multiplicity=mult,
+        observations=int(used.sum()),
+        rejected=sum(1 for r in rej if r.obs >= 0),
+        sigma0=s0,
+        sigma0_um=s0 * ld.sigma_ref_mm * 1000.0,
+        sigma0_px=s0 * ld.sigma_ref_mm / px,
+        image_rms_um=(image_rms[0], image_rms[1]),
+        object_rms_m=obj_rms,
+        object_rms_predicted_m=obj_pred,
+        redundancy=sol.dof,
+        iterations=sol.iterations,
+        seconds=round(seconds, 3),
+        gps_used=ld.gps_used,
+        calibration=calibration,
+        rejections=rejections,
+        control_residuals=ctrl_res,
+        check_residuals=check_res,
+        exterior=exterior,
+        notes=ld.notes,
+        subblocks=sub_reports,
+    )
+
+
+def _store(block: Block, ld: Loaded, sol: BundleSolution, rej, adj_id: int, report) -> None:
+    pb = ld.problem
+    rej_reason = {r.obs: r.reason for r in rej if r.obs >= 0}
+    v_px = _residual_px(ld, sol)
+    w = np.nan_to_num(sol.w_obs, nan=-1.0)
+    weight = np.ones(len(pb.obs_image))
+    for o in rej_reason:
+        weight[o] = 0.0
+    rays = np.bincount(pb.obs_point[weight > 0], minlength=pb.n_points)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rxy = sol.xyz_cov[:, 0, 1] / (sol.xyz_std[:, 0] * sol.xyz_std[:, 1])
+    with block.conn:
+        c = block.conn
+        c.execute("DELETE FROM exterior")
+        c.executemany(
+            "INSERT INTO exterior VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+            [(n, adj_id, *map(float, sol.eo[k]), *map(_f, sol.eo_std[k]))
+             for k, n in enumerate(ld.images)],
+        )  # fmt: skip
+        c.execute("DELETE FROM adjusted_points")
+        c.executemany(
+            "INSERT INTO adjusted_points VALUES (?,?,?,?,?,?,?,?,?,?)",
+            [(pid, adj_id, *map(float, sol.xyz[k]), *map(_f, sol.xyz_std[k]), _f(rxy[k]),
+              int(rays[k])) for k, pid in enumerate(ld.point_ids)],
+        )  # fmt: skip
+        c.execute("DELETE FROM residuals")
+        c.executemany(
+            "INSERT INTO residuals VALUES (?,?,?,?,?,?,?,?)",
+            [
+                (ld.point_ids[int(pb.obs_point[o])], ld.images[int(pb.obs_image[o])], adj_id,
+                 float(v_px[o, 0]), float(v_px[o, 1]), None if w[o] < 0 else float(w[o]),
+                 int(o in rej_reason), rej_reason.get(o, ""))
+                for o in range(len(pb.obs_image))
+            ],
+        )  # fmt: skip
+        c.execute(
+            "UPDATE adjustments SET finished = ?, report = ? WHERE id = ?",
+            (time.strftime("%Y-%m-%dT%H:%M:%S%z"), json.dumps(report.to_dict()), adj_id),
+        )
+
+
+def _f(v) -> float | None:
+    v = float(v)
+    return v if math.isfinite(v) else None
