@@ -124,26 +124,29 @@ class SessionFeed:
         }
         self._touched: set[str] = set()
         self._status = server.status_coalescer(self._flush_status)
+        self._geometry = session.geometry
+        eng = session.engine
+        self._last = Status(eng.mode, eng.layer_ext, "", eng.mark(), {})
         self.batches = 0
 
     # ------------------------------------------------------------------ session thread
 
     def __call__(self, session, event, effects: list) -> None:
-        status = None
         changes = None
         for e in effects:
             t = type(e)
             if t is Status:
-                status = e
+                self._last = e
             elif t is not Plates:
                 if changes is None:
                     changes = []
                 changes.append(e)
         if changes is not None:
             self._send(session, changes)
-        if status is not None:
-            d = session.display
-            self._status.put((status, d.scale, d.crosshair))
+        eng = session.engine
+        d = session.display
+        # the floating mark moves with every tablet report: the latest one is handed over
+        self._status.put((self._last, eng.mark_xy, eng.z_model, d.scale, d.crosshair))
 
     def end(self, session) -> None:
         """The session is over: a last check of every layer, and ``ended`` for the pages."""
@@ -293,9 +296,13 @@ class SessionFeed:
     # ------------------------------------------------------------------ server loop
 
     def _flush_status(self, value) -> None:
-        st, scale, crosshair = value
+        st, xy, z_model, scale, crosshair = value
+        mark = None
+        if xy is not None:
+            mark = (xy[0], xy[1], self._geometry.correct_z(xy[0], xy[1], z_model))
+        counts = st.counts or self.server.hub.status.get("counts", {})
         self.server.hub.set_status(
-            _status_dict(st.mode, st.layer, st.prompt, st.mark, st.counts, self.map_id),
+            _status_dict(st.mode, st.layer, st.prompt, mark, counts, self.map_id),
             {"scale": scale, "crosshair": crosshair},
         )
 

@@ -307,10 +307,10 @@ class ViewServer:
         app.router.add_get(prefix + "style.css", page("style.css"))
         app.router.add_get(prefix + "state.json", state)
         app.router.add_get(prefix + "ws", ws_handler)
-        runner = web.AppRunner(app, handle_signals=False, access_log=None)
+        runner = web.AppRunner(app, handle_signals=False, access_log=None, shutdown_timeout=1.0)
         await runner.setup()
         self._runner = runner
-        site = web.SockSite(runner, sock, shutdown_timeout=1.0)
+        site = web.SockSite(runner, sock)
         await site.start()
 
     async def _shutdown(self) -> None:

@@ -214,3 +214,73 @@ def test_sample_session_live_in_the_browser(chrome, sandbox, served, tmp_path):
     code, out, err = srv.stop()
     assert code == 0, err
     assert "Traceback" not in err
+
+
+def test_display_scale_crosshair_and_mark_act_on_the_page(chrome, tmp_path):
+    """PROCEED items 1 and 3 zoom the page and size its crosshair; the mark moves; two pages."""
+    from apygis.compile.events import Mark, Press
+    from apygis.compile.oriented import OrientedGeometry
+    from apygis.orient.io import load_orientation
+    from apygis.session import Session
+    from apygis.view import SessionFeed, ViewServer, session_hub
+    from tests.conftest import SAMPLES
+    from tests.view.wsclient import WsClient
+
+    apygis.write(apygis.read(SAMPLES / "ZH1091"), tmp_path / "ZH1091", driver="apy")
+    geometry = OrientedGeometry(load_orientation(SAMPLES / "session" / "ZH1091.orientation.json"))
+    sess = Session(tmp_path / "ZH1091", geometry, layer="r")
+    server = ViewServer(session_hub(sess))
+    server.start()
+    sess.subscribe(SessionFeed(server, sess))
+    other = WsClient(server.url)  # a second page at the same time
+    try:
+        chrome.get(server.url)
+        _until(chrome, "return window.apygisView.seq() >= 0;")
+
+        def press(*buttons):
+            for b in buttons:
+                sess.handle(Press(b))
+
+        X, Y = 2684300.0, 1247900.0
+        sess.handle(Mark(*geometry.tablet(X, Y)))
+        _until(chrome, "const s = window.apygisView.status(); return s.mark && s.mark.length;")
+        mk = _hook(chrome, "status()")["mark"]
+        assert abs(mk[0] - X) < 0.01 and abs(mk[1] - Y) < 0.01
+        press("PROCEED", "1", "ENTER", "4", "ENTER")  # display scale factor 4x
+        _until(chrome, "return window.apygisView.display().scale === 4;")
+        v = _hook(chrome, "view()")
+        assert v["factor"] == 4
+        assert abs(v["cx"] - mk[0]) < 1e-6 and abs(v["cy"] - mk[1]) < 1e-6
+        # 4x at 1:5000: one ground metre is 4 * 0.2 mm on the screen
+        assert v["pxPerM"] == pytest.approx(4 * 0.2 * 96 / 25.4)
+        base = _hook(chrome, "drawNow()")["crosshair_px"]
+        press("3", "ENTER", "2", "ENTER")  # crosshair scale 2x
+        _until(chrome, "return window.apygisView.display().crosshair === 2;")
+        assert _hook(chrome, "drawNow()")["crosshair_px"] == pytest.approx(2 * base)
+        # back to compiling: a line of four points appears as it is entered
+        press("5", "ENTER", "DESCR", "2", "ENTER", "ENTER", "1", "2", "ENTER")
+        for k in range(4):
+            sess.handle(Mark(*geometry.tablet(X + 25.0 * k, Y + 8.0 * k * k)))
+            press("ENTER")
+            n = sess.entries
+            _until(chrome, f"return window.apygisView.entries().length === {n};", 10)
+        press("PROCEED")
+        mk2 = (X + 20.0, Y - 15.0)
+        sess.handle(Mark(*geometry.tablet(*mk2)))
+        _until(
+            chrome,
+            f"const s = window.apygisView.status(); return s.mark && Math.abs(s.mark[0] - {mk2[0]}) < 0.01;",
+        )
+        drawn = _hook(chrome, "drawNow()")
+        assert drawn["mark"] and drawn["segments"] > 0
+        chrome.save_screenshot(str(tmp_path / "session-4x.png"))
+        want = {lay.ext: layer_rows(lay) for lay in sess.map}
+        assert _hook(chrome, "records()") == want
+        other.wait(lambda m: m.display.get("crosshair") == 2 and len(m.entries) == sess.entries)
+        assert other.mirror.records() == {
+            k: {t: sorted(r) for t, r in v.items()} for k, v in want.items()
+        }
+    finally:
+        other.close()
+        server.stop()
+        sess.close()

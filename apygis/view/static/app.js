@@ -207,7 +207,7 @@
   function fit() {
     const e = extent();
     if (!e) return placeAt(0, 0, 1);
-    const w = Math.max(canvas.clientWidth, 100) * 0.9, h = Math.max(canvas.clientHeight, 100) * 0.9;
+    const w = Math.max(canvas.clientWidth, 100) * 0.85, h = Math.max(canvas.clientHeight, 100) * 0.85;
     const scale = S.meta.scale || 1000;
     const dx = Math.max(e[2] - e[0], 1e-3), dy = Math.max(e[3] - e[1], 1e-3);
     const k = Math.min(w / dx, h / dy); // px per m
