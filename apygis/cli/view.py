@@ -77,7 +77,7 @@ def serve_until_interrupted(server, note: str = "Ctrl-C to stop") -> None:
 
 
 def host_options(prefix: str = ""):
-    """The ``--host``/``--port`` (or ``--view-host``/``--view-port``) and ``--no-browser`` options."""
+    """Options ``--host``, ``--port`` (``--view-host``, ``--view-port``), ``--no-browser``."""
 
     def deco(f):
         f = click.option(

@@ -123,7 +123,7 @@ class SessionFeed:
             lay.ext: _refs_of(lay.line_points) for lay in session.map
         }
         self._touched: set[str] = set()
-        self._status = server.status_coalescer(self._flush_status)
+        self._box = server.mailbox(self._apply, self._flush_status)
         self._geometry = session.geometry
         eng = session.engine
         self._last = Status(eng.mode, eng.layer_ext, "", eng.mark(), {})
@@ -146,7 +146,7 @@ class SessionFeed:
         eng = session.engine
         d = session.display
         # the floating mark moves with every tablet report: the latest one is handed over
-        self._status.put((self._last, eng.mark_xy, eng.z_model, d.scale, d.crosshair))
+        self._box.put((self._last, eng.mark_xy, eng.z_model, d.scale, d.crosshair))
 
     def end(self, session) -> None:
         """The session is over: a last check of every layer, and ``ended`` for the pages."""
@@ -291,7 +291,10 @@ class SessionFeed:
 
     def _post(self, change: dict) -> None:
         self.batches += 1
-        self.server.post(_apply, self.server.hub, change)
+        self._box.add(change)
+
+    def _apply(self, change: dict) -> None:  # on the server's loop
+        _apply(self.server.hub, change)
 
     # ------------------------------------------------------------------ server loop
 

@@ -20,7 +20,11 @@ Messages to a page (JSON text, each with ``t`` its type):
     ``ended`` when the session is over.
 ``status``
     The status line and the floating mark, the latest only (a page is sent
-    no more than it can draw; :data:`STATUS_INTERVAL_S`).
+    no more than it can draw).
+
+Changes reach the hub at most every :data:`DELIVERY_INTERVAL_S` (all that
+came meanwhile, in order), so that a busy session wakes the server's thread
+a bounded number of times a second.
 
 Every page has a bounded queue (:attr:`Viewer.limit` messages). When a page
 does not keep up (a slow network, a page in a background tab, a closed lid)
@@ -40,14 +44,15 @@ from typing import Any
 
 from apygis.view.scene import TABLE_NAMES, Pens
 
-__all__ = ["DEFAULT_QUEUE_LIMIT", "STATUS_INTERVAL_S", "Viewer", "ViewHub"]
+__all__ = ["DEFAULT_QUEUE_LIMIT", "DELIVERY_INTERVAL_S", "ViewHub", "Viewer"]
 
 log = logging.getLogger(__name__)
 
 #: Messages a page may have waiting before it is resynchronised with the whole state.
 DEFAULT_QUEUE_LIMIT = 256
-#: The status line (and the floating mark) is sent at most this often, seconds.
-STATUS_INTERVAL_S = 0.02
+#: Changes and the status line are delivered to the hub at most this often, seconds (the
+#: first after a pause at once).
+DELIVERY_INTERVAL_S = 0.01
 #: Monitor messages kept for a page that opens later.
 MESSAGES_KEPT = 200
 #: AREA and DHI results kept as overlays.

@@ -67,7 +67,12 @@ def map_meta(m: MapFile, source: str = "") -> dict[str, Any]:
     exts = [e for e in exts if e is not None]
     if exts:
         a = np.array(exts, dtype=float)
-        ext = [float(a[:, 0].min()), float(a[:, 1].min()), float(a[:, 3].max()), float(a[:, 4].max())]
+        ext = [
+            float(a[:, 0].min()),
+            float(a[:, 1].min()),
+            float(a[:, 3].max()),
+            float(a[:, 4].max()),
+        ]
     return {
         "id": m.id,
         "scale": m.scale,

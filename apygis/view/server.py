@@ -3,7 +3,7 @@
 :class:`ViewServer` runs an aiohttp application on an event loop in a
 thread of its own, so that the program that feeds it (a session, an
 orientation) never waits for it: other threads hand it changes with
-:meth:`ViewServer.post` and :class:`Coalescer`, which only schedule work on
+:meth:`ViewServer.post` and a :class:`Mailbox`, which only schedule work on
 the loop.
 
 Addresses (every one under the secret token, so that another user of the
@@ -30,15 +30,16 @@ import logging
 import secrets
 import socket
 import threading
+from collections import deque
 from collections.abc import Callable
 from importlib import resources
 from typing import Any
 from urllib.parse import urlsplit
 
 from apygis.errors import ViewError
-from apygis.view.hub import STATUS_INTERVAL_S, Viewer, ViewHub
+from apygis.view.hub import DELIVERY_INTERVAL_S, Viewer, ViewHub
 
-__all__ = ["Coalescer", "ViewServer", "is_loopback"]
+__all__ = ["Mailbox", "ViewServer", "is_loopback"]
 
 log = logging.getLogger(__name__)
 
@@ -70,33 +71,55 @@ def _static_files() -> dict[str, tuple[bytes, str]]:
     return {key: ((pkg / name).read_bytes(), ctype) for key, (name, ctype) in _STATIC.items()}
 
 
-class Coalescer:
-    """Hand the latest value from another thread to the loop, at most once per ``interval``.
+class Mailbox:
+    """Changes and the latest status, handed from another thread to the server's loop.
 
-    :meth:`put` (any thread) keeps the value and, unless a hand-over is
-    already due, schedules one; ``flush(value)`` runs on the loop with the
-    latest value. The producer never waits and no final value is lost.
+    :meth:`add` (any thread) queues a change, to be applied in order;
+    :meth:`put` keeps only the latest status. Neither waits: each only
+    schedules a delivery on the loop unless one is due already. A delivery
+    applies every queued change (``apply(change)``), then the latest status
+    (``status(value)``), and the next one comes no sooner than ``interval``
+    seconds later, so that a busy producer wakes the loop at most
+    ``1 / interval`` times a second; nothing queued is ever lost.
     """
 
-    def __init__(self, server: ViewServer, flush: Callable[[Any], None], interval: float):
+    def __init__(
+        self,
+        server: ViewServer,
+        apply: Callable[[Any], None],
+        status: Callable[[Any], None],
+        interval: float,
+    ):
         self._server = server
-        self._flush = flush
+        self._apply = apply
+        self._status = status
         self._interval = interval
+        self._queue: deque[Any] = deque()
         self._value: Any = None
         self._dirty = False
         self._armed = False
 
+    def add(self, change: Any) -> None:
+        self._queue.append(change)
+        self._wake()
+
     def put(self, value: Any) -> None:
         self._value = value
         self._dirty = True
+        self._wake()
+
+    def _wake(self) -> None:
         if not self._armed:
             self._armed = True
-            self._server.post(self._fire)
+            self._server.post(self._deliver)
 
-    def _fire(self) -> None:  # on the loop
-        self._dirty = False
+    def _deliver(self) -> None:  # on the loop
         try:
-            self._flush(self._value)
+            while self._queue:
+                self._server._run_safely(self._apply, (self._queue.popleft(),))
+            if self._dirty:
+                self._dirty = False
+                self._server._run_safely(self._status, (self._value,))
         finally:
             loop = self._server.loop
             if loop is not None:
@@ -104,9 +127,9 @@ class Coalescer:
 
     def _rearm(self) -> None:  # on the loop
         self._armed = False
-        if self._dirty:
+        if self._queue or self._dirty:
             self._armed = True
-            self._fire()
+            self._deliver()
 
 
 class ViewServer:
@@ -286,9 +309,7 @@ class ViewServer:
             self._sockets.add(ws)
             self._connected.set()
             sender = asyncio.ensure_future(viewer.run(self.hub))
-            sender.add_done_callback(
-                lambda t: t.cancelled() or asyncio.ensure_future(ws.close())
-            )
+            sender.add_done_callback(lambda t: t.cancelled() or asyncio.ensure_future(ws.close()))
             try:
                 async for _ in ws:  # view only: whatever a page sends is dropped
                     pass
@@ -353,9 +374,10 @@ class ViewServer:
         except Exception:
             log.exception("view: a change could not be applied")
 
-    def status_coalescer(self, flush: Callable[[Any], None]) -> Coalescer:
-        """A :class:`Coalescer` for the status line, at :data:`STATUS_INTERVAL_S`."""
-        return Coalescer(self, flush, STATUS_INTERVAL_S)
+    def mailbox(self, apply: Callable[[Any], None], status: Callable[[Any], None]) -> Mailbox:
+        """A :class:`Mailbox` onto this server's loop, delivering at most every
+        :data:`~apygis.view.hub.DELIVERY_INTERVAL_S`."""
+        return Mailbox(self, apply, status, DELIVERY_INTERVAL_S)
 
     def wait_for_viewer(self, timeout: float) -> bool:
         """Wait until a page has connected (True), or ``timeout`` seconds (False)."""

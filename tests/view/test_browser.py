@@ -156,7 +156,7 @@ def test_view_shows_the_sample_map(chrome, sandbox, served, tmp_path):
     canvas = chrome.find_element("id", "map")
     w, h = canvas.size["width"], canvas.size["height"]
     ActionChains(chrome).move_to_element_with_offset(
-        canvas, int(round(sx - w / 2)), int(round(sy - h / 2))
+        canvas, round(sx - w / 2), round(sy - h / 2)
     ).click().perform()
     sel = _until(chrome, "return window.apygisView.selected();", 5)
     assert sel == {"ext": "h", "table": "line_points", "num": int(lp["num"])}
@@ -170,7 +170,7 @@ def test_view_shows_the_sample_map(chrome, sandbox, served, tmp_path):
     assert "EPSG:2056" in readout
     x_shown = float(re.search(r"X (\S+)", readout).group(1))
     assert abs(x_shown - float(lp["x"])) < 2.0  # within a pixel or two at the fitted scale
-    code, out, err = srv.stop()
+    code, _out, err = srv.stop()
     assert code == 0, err
     assert "Traceback" not in err
 
@@ -205,13 +205,15 @@ def test_sample_session_live_in_the_browser(chrome, sandbox, served, tmp_path):
 
     # AREA and DHI results are drawn; the status line and the mark are shown
     kinds = [o["kind"] for o in _hook(chrome, "overlays()")]
-    assert "area" in kinds and "dhi" in kinds
+    assert "area" in kinds
+    assert "dhi" in kinds
     drawn = _hook(chrome, "drawNow()")
-    assert drawn["overlays"] >= 2 and drawn["mark"]
+    assert drawn["overlays"] >= 2
+    assert drawn["mark"]
     status = _hook(chrome, "status()")
     assert status["mode"] == "terminated"
     assert _hook(chrome, "messages()")[-1] == "compilation terminated"
-    code, out, err = srv.stop()
+    code, _out, err = srv.stop()
     assert code == 0, err
     assert "Traceback" not in err
 
@@ -245,12 +247,14 @@ def test_display_scale_crosshair_and_mark_act_on_the_page(chrome, tmp_path):
         sess.handle(Mark(*geometry.tablet(X, Y)))
         _until(chrome, "const s = window.apygisView.status(); return s.mark && s.mark.length;")
         mk = _hook(chrome, "status()")["mark"]
-        assert abs(mk[0] - X) < 0.01 and abs(mk[1] - Y) < 0.01
+        assert abs(mk[0] - X) < 0.01
+        assert abs(mk[1] - Y) < 0.01
         press("PROCEED", "1", "ENTER", "4", "ENTER")  # display scale factor 4x
         _until(chrome, "return window.apygisView.display().scale === 4;")
         v = _hook(chrome, "view()")
         assert v["factor"] == 4
-        assert abs(v["cx"] - mk[0]) < 1e-6 and abs(v["cy"] - mk[1]) < 1e-6
+        assert abs(v["cx"] - mk[0]) < 1e-6
+        assert abs(v["cy"] - mk[1]) < 1e-6
         # 4x at 1:5000: one ground metre is 4 * 0.2 mm on the screen
         assert v["pxPerM"] == pytest.approx(4 * 0.2 * 96 / 25.4)
         base = _hook(chrome, "drawNow()")["crosshair_px"]
@@ -269,10 +273,12 @@ def test_display_scale_crosshair_and_mark_act_on_the_page(chrome, tmp_path):
         sess.handle(Mark(*geometry.tablet(*mk2)))
         _until(
             chrome,
-            f"const s = window.apygisView.status(); return s.mark && Math.abs(s.mark[0] - {mk2[0]}) < 0.01;",
+            "const s = window.apygisView.status();"
+            f" return s.mark && Math.abs(s.mark[0] - {mk2[0]}) < 0.01;",
         )
         drawn = _hook(chrome, "drawNow()")
-        assert drawn["mark"] and drawn["segments"] > 0
+        assert drawn["mark"]
+        assert drawn["segments"] > 0
         chrome.save_screenshot(str(tmp_path / "session-4x.png"))
         want = {lay.ext: layer_rows(lay) for lay in sess.map}
         assert _hook(chrome, "records()") == want

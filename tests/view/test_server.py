@@ -18,7 +18,7 @@ from apygis.instrument.replay import Replayer, check_recording
 from apygis.instrument.tablet import TabletConfig, make_parser
 from apygis.orient.io import load_orientation
 from apygis.session import ReportDecoder, Session
-from apygis.view import SessionFeed, ViewServer, Viewer, ViewHub, map_hub, session_hub
+from apygis.view import SessionFeed, Viewer, ViewHub, ViewServer, map_hub, session_hub
 from apygis.view.scene import Pens, layer_rows
 from tests.conftest import SAMPLES
 from tests.view.wsclient import WsClient
@@ -51,7 +51,14 @@ def test_every_address_needs_the_token(map_server):
     base = server.url.rsplit("/", 2)[0]  # http://127.0.0.1:PORT
     assert server.url.startswith("http://127.0.0.1:")
     assert len(server.token) >= 20
-    for path in ("/", "/app.js", "/ws", "/state.json", "/x" + server.token + "/", "/" + server.token[:-1] + "/"):
+    for path in (
+        "/",
+        "/app.js",
+        "/ws",
+        "/state.json",
+        "/x" + server.token + "/",
+        "/" + server.token[:-1] + "/",
+    ):
         status, _, body = _get(base + path)
         assert status == 403, path
         assert b"state" not in body
@@ -61,11 +68,13 @@ def test_every_address_needs_the_token(map_server):
     assert "default-src 'none'" in headers["Content-Security-Policy"]
     assert headers["Cache-Control"] == "no-store"
     status, _, body = _get(server.url + "app.js")
-    assert status == 200 and b"apygisView" in body
+    assert status == 200
+    assert b"apygisView" in body
     # nothing in the page is loaded from elsewhere
     for name in ("", "app.js", "style.css"):
         _, _, body = _get(server.url + name)
-        assert b"http://" not in body.replace(b"http://www.w3.org", b"") and b"https://" not in body
+        assert b"http://" not in body.replace(b"http://www.w3.org", b"")
+        assert b"https://" not in body
 
 
 def test_the_page_can_only_view(map_server):
@@ -143,9 +152,10 @@ def test_a_page_that_falls_behind_gets_the_whole_state_and_loses_nothing():
 
     import json
 
-    hub, v, sent = asyncio.run(main())
+    _, v, sent = asyncio.run(main())
     msgs = [json.loads(s) for s in sent]
-    assert msgs[0]["t"] == "state" and msgs[0]["seq"] == 0  # the first message on connecting
+    assert msgs[0]["t"] == "state"
+    assert msgs[0]["seq"] == 0
     assert v.resyncs >= 1
     states = [m for m in msgs[1:] if m["t"] == "state"]
     assert states, "the page that fell behind was sent the whole state"
@@ -246,7 +256,13 @@ def test_pages_opened_before_and_during_a_session_end_equal_to_its_map(tmp_path)
         slow.start_reading()
         want = _rows(sess.map)
         for c in (early, late, slow):
-            c.wait(lambda m: m.ended and m.records() == {k: {t: sorted(r) for t, r in v.items()} for k, v in want.items()})
+            c.wait(
+                lambda m: (
+                    m.ended
+                    and m.records()
+                    == {k: {t: sorted(r) for t, r in v.items()} for k, v in want.items()}
+                )
+            )
         # the early page saw every entry arrive, one delta at a time, in order
         nums = [e[0] for e in early.mirror.entries]
         assert nums == list(range(1, sess.entries + 1))

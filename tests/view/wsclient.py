@@ -131,7 +131,7 @@ class WsClient:
     def start_reading(self) -> None:
         self._reading.set()
 
-    def wait(self, pred, timeout: float = 10.0) -> None:
+    def wait(self, pred, timeout: float = 30.0) -> None:
         deadline = time.monotonic() + timeout
         while not pred(self.mirror):
             if time.monotonic() > deadline:
