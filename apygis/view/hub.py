@@ -53,6 +53,9 @@ DEFAULT_QUEUE_LIMIT = 256
 #: Changes and the status line are delivered to the hub at most this often, seconds (the
 #: first after a pause at once).
 DELIVERY_INTERVAL_S = 0.01
+#: The status line and the floating mark are delivered at most this often, seconds (30 a
+#: second: as smooth as a screen needs).
+STATUS_INTERVAL_S = 1.0 / 30.0
 #: Monitor messages kept for a page that opens later.
 MESSAGES_KEPT = 200
 #: AREA and DHI results kept as overlays.

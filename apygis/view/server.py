@@ -37,7 +37,7 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from apygis.errors import ViewError
-from apygis.view.hub import DELIVERY_INTERVAL_S, Viewer, ViewHub
+from apygis.view.hub import DELIVERY_INTERVAL_S, STATUS_INTERVAL_S, Viewer, ViewHub
 
 __all__ = ["Mailbox", "ViewServer", "is_loopback"]
 
@@ -78,9 +78,10 @@ class Mailbox:
     :meth:`put` keeps only the latest status. Neither waits: each only
     schedules a delivery on the loop unless one is due already. A delivery
     applies every queued change (``apply(change)``), then the latest status
-    (``status(value)``), and the next one comes no sooner than ``interval``
-    seconds later, so that a busy producer wakes the loop at most
-    ``1 / interval`` times a second; nothing queued is ever lost.
+    (``status(value)``, at most every :data:`~apygis.view.hub.STATUS_INTERVAL_S`),
+    and the next one comes no sooner than ``interval`` seconds later, so that a
+    busy producer wakes the loop at most ``1 / interval`` times a second;
+    nothing queued is ever lost, and the last status always arrives.
     """
 
     def __init__(
@@ -98,6 +99,7 @@ class Mailbox:
         self._value: Any = None
         self._dirty = False
         self._armed = False
+        self._status_at = -1e9
 
     def add(self, change: Any) -> None:
         self._queue.append(change)
@@ -117,8 +119,11 @@ class Mailbox:
         try:
             while self._queue:
                 self._server._run_safely(self._apply, (self._queue.popleft(),))
-            if self._dirty:
+            loop = self._server.loop
+            now = loop.time() if loop is not None else 0.0
+            if self._dirty and now - self._status_at >= STATUS_INTERVAL_S:
                 self._dirty = False
+                self._status_at = now
                 self._server._run_safely(self._status, (self._value,))
         finally:
             loop = self._server.loop
