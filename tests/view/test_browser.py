@@ -210,8 +210,7 @@ def test_sample_session_live_in_the_browser(chrome, sandbox, served, tmp_path):
     drawn = _hook(chrome, "drawNow()")
     assert drawn["overlays"] >= 2
     assert drawn["mark"]
-    status = _hook(chrome, "status()")
-    assert status["mode"] == "terminated"
+    _until(chrome, "return window.apygisView.status().mode === 'terminated';", 10)
     assert _hook(chrome, "messages()")[-1] == "compilation terminated"
     code, _out, err = srv.stop()
     assert code == 0, err

@@ -269,7 +269,7 @@ def test_pages_opened_before_and_during_a_session_end_equal_to_its_map(tmp_path)
         assert early.mirror.kinds.count("state") == 1
         # the late page got the entries made before it opened within its first state
         assert [e[0] for e in late.mirror.entries] == nums
-        assert late.mirror.status["mode"] == "terminated"
+        late.wait(lambda m: m.status.get("mode") == "terminated")  # the last status arrives
         kinds = {o["kind"] for o in early.mirror.overlays}
         assert {"area", "dhi"} <= kinds
     finally:
