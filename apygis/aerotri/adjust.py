@@ -231,7 +231,7 @@ def load_problem(block: Block, options: AdjustOptions | None = None) -> Loaded:
         )
     kinds = np.array([r[5] for r in rows])
     # points to adjust: two rays, or control with observed coordinates and one ray
-    rays = {}
+    rays: dict[int, int] = {}
     for p in obs_pt:
         rays[int(p)] = rays.get(int(p), 0) + 1
     control_kinds = ("full", "planimetric", "height")
@@ -462,16 +462,16 @@ def _behind(xyz, eo, R, oi, op) -> np.ndarray:
 
 def _on_terrain(eo, R, oi, op, d, bad, tz) -> np.ndarray:
     """Points on the plane ``Z = tz`` along the first ray of each."""
-    first = {}
+    first: dict[int, int] = {}
     for k, p in enumerate(op):
         if bad[p] and p not in first:
             first[int(p)] = k
     out = np.zeros((int(bad.sum()), 3))
     idx = np.nonzero(bad)[0]
     for j, p in enumerate(idx):
-        k = first.get(int(p))
-        if k is None:
+        if int(p) not in first:
             continue
+        k = first[int(p)]
         C, v = eo[oi[k], :3], d[k]
         t = (tz - C[2]) / v[2] if v[2] != 0 else 0.0
         out[j] = C + t * v
@@ -710,8 +710,10 @@ def _report(block, ld: Loaded, sol: BundleSolution, rej: list[Rejection], adj_id
     if ld.check:
         ci = np.array(ld.check)
         e = sol.xyz[ci] - ld.check_xyz
-        obj_rms = tuple(float(v) for v in np.sqrt(np.mean(e**2, axis=0)))
-        obj_pred = tuple(float(v) for v in np.sqrt(np.nanmean(sol.xyz_std[ci] ** 2, axis=0)))
+        rm = np.sqrt(np.mean(e**2, axis=0))
+        pr = np.sqrt(np.nanmean(sol.xyz_std[ci] ** 2, axis=0))
+        obj_rms = (float(rm[0]), float(rm[1]), float(rm[2]))
+        obj_pred = (float(pr[0]), float(pr[1]), float(pr[2]))
         for j, k in enumerate(ci):
             check_res.append({
                 "point": ld.point_names[k], "dX": e[j, 0], "dY": e[j, 1], "dZ": e[j, 2],

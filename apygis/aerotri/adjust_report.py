@@ -361,7 +361,7 @@ def residual_display(block: Block, path, *, dpi: int = 120, columns: int = 6) ->
         for sel, col in ((good, "#1f77b4"), (~good, "#d62728")):
             if sel.any():
                 seg = np.stack([a[sel, :2], a[sel, :2] + mag * a[sel, 2:4]], axis=1)
-                ax.add_collection(LineCollection(seg, colors=col, lw=0.5))
+                ax.add_collection(LineCollection(list(seg), colors=col, lw=0.5))
         ax.set_xlim(0, w)
         ax.set_ylim(h, 0)
         ax.set_aspect("equal")

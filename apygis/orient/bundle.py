@@ -70,6 +70,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -131,8 +132,9 @@ class BundleProblem:
     obs_point: np.ndarray
     obs_xy: np.ndarray
     obs_sigma: np.ndarray
-    free: np.ndarray | None = None
-    calibration_sigma: np.ndarray | None = None
+    # (K, 10) after construction; None: all fixed, no priors
+    free: Any = None
+    calibration_sigma: Any = None
     ctrl_point: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     ctrl_xyz: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     ctrl_sigma: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
@@ -1146,10 +1148,10 @@ def _snoop(
     out: list[Rejection] = []
     # control coordinates beat their point's image observations when their test is larger
     by_point_ctrl: dict[int, int] = {}
-    for c in np.nonzero(wc > threshold)[0]:
-        pt = int(pb.ctrl_point[c])
-        if pt not in by_point_ctrl or wc[c] > wc[by_point_ctrl[pt]]:
-            by_point_ctrl[pt] = int(c)
+    for ci in np.nonzero(wc > threshold)[0].tolist():
+        pt = int(pb.ctrl_point[ci])
+        if pt not in by_point_ctrl or wc[ci] > wc[by_point_ctrl[pt]]:
+            by_point_ctrl[pt] = ci
     # observations grouped by point, the largest w first
     order = np.lexsort((-w, j))
     order = order[used[order]]
@@ -1165,22 +1167,22 @@ def _snoop(
         int(j[o]) in by_point_ctrl and wc[by_point_ctrl[int(j[o])]] >= w[o] for o in top
     ], bool)  # fmt: skip
     flagged &= ~ctrl_wins
+    group_pts = pts[start] if len(pts) else np.zeros(0, np.int64)
     for c in by_point_ctrl.values():
         pt = int(pb.ctrl_point[c])
-        g = np.searchsorted(pts, pt) if len(pts) else 0
-        if g < len(start) and g < len(pts) and pts[start[g]] == pt and not ctrl_wins[g]:
+        gi = int(np.searchsorted(group_pts, pt))
+        if gi < len(group_pts) and group_pts[gi] == pt and not ctrl_wins[gi]:
             continue  # an image observation of this point has the larger test
         res = tuple(float(v) for v in sol.ctrl_residuals[c])
         out.append(Rejection(-1, int(c), res, float(wc[c]), rnd, REJECTED_CONTROL))
     # localised: the largest clearly above the second (else all rays of the point go)
     local = flagged & (count >= 3) & (second < LOCALISE_RATIO * rt[top])
     whole = flagged & ~local
-    for g in np.nonzero(local)[0]:
-        o = top[g]
+    for o in top[local]:
         out.append(_rej(sol, o, rnd, REJECTED_LARGEST, w[o]))
-    for g in np.nonzero(whole)[0]:
-        reason = REJECTED_TWO_RAYS if count[g] == 2 else REJECTED_NOT_LOCALISED
-        for o in order[start[g] : start[g] + count[g]]:
+    for s0, n in zip(start[whole], count[whole], strict=True):
+        reason = REJECTED_TWO_RAYS if n == 2 else REJECTED_NOT_LOCALISED
+        for o in order[s0 : s0 + n]:
             out.append(_rej(sol, o, rnd, reason, w[o]))
     del tc
     return out
