@@ -71,6 +71,10 @@ def adjust_text(r: dict, *, max_rows: int = 40) -> str:
     rows += [
         ("Observations", f"{r['observations']} (rejected {r['rejected']})"),
         ("sigma0", f"{_f(r['sigma0'], '.3f')} (of the a priori precisions)"),
+        *(
+            (f"  variance factor {k}", _f(v, ".3f"))
+            for k, v in sorted(r.get("variance_factors", {}).items())
+        ),
         ("sigma0 (um)", _f(r["sigma0_um"], ".2f")),
         ("sigma0 (px)", _f(r["sigma0_px"], ".3f")),
         (
@@ -81,7 +85,7 @@ def adjust_text(r: dict, *, max_rows: int = 40) -> str:
     if r.get("object_rms_m"):
         o, p = r["object_rms_m"], r.get("object_rms_predicted_m") or [None] * 3
         rows.append(("Object rms x/y/z (m)", " ".join(_f(v, ".3f") for v in o)))
-        rows.append(("  predicted by the covariance", " ".join(_f(v, ".3f") for v in p)))
+        rows.append(("  expected (covariance and given)", " ".join(_f(v, ".3f") for v in p)))
     rows += [
         ("Redundancy", f"{r['redundancy']}"),
         ("Iterations / seconds", f"{r['iterations']} / {r['seconds']:.1f}"),
@@ -169,7 +173,7 @@ def export_points(block: Block, path) -> int:
     for name, kind, X, Y, Z, sx, sy, sz, n in rows:
         wr.writerow([name, kind, f"{X:.4f}", f"{Y:.4f}", f"{Z:.4f}", _f(sx, ".4f"),
                      _f(sy, ".4f"), _f(sz, ".4f"), n])  # fmt: skip
-    atomic_write(Path(path), buf.getvalue())
+    atomic_write(Path(path), buf.getvalue(), parents=True)
     return len(rows)
 
 
@@ -187,7 +191,7 @@ def export_exterior(block: Block, path) -> int:
         image, _, *v = r
         wr.writerow([image, *(f"{x:.4f}" for x in v[:3]), *(f"{x:.9f}" for x in v[3:6]),
                      *(_f(x, ".4f") for x in v[6:9]), *(_f(x, ".9f") for x in v[9:])])  # fmt: skip
-    atomic_write(Path(path), buf.getvalue())
+    atomic_write(Path(path), buf.getvalue(), parents=True)
     return len(rows)
 
 
@@ -206,7 +210,7 @@ def _save(fig, path: Path, dpi: int) -> Path:
     buf = io.BytesIO()
     canvas = FigureCanvasAgg(fig) if fmt == "png" else FigureCanvasPdf(fig)
     canvas.print_figure(buf, format=fmt, dpi=dpi)
-    atomic_write(path, buf.getvalue())
+    atomic_write(path, buf.getvalue(), parents=True)
     return path
 
 

@@ -350,7 +350,7 @@ def at_adjust(block, calibrate, gps_sigma, no_gps, threshold, no_robust, restart
         d = r.to_dict()
         text = adjust_text(d)
         if report is not None:
-            atomic_write(report, adjust_text(d, max_rows=10**9))
+            atomic_write(report, adjust_text(d, max_rows=10**9), parents=True)
         if display is not None:
             adjust_display(b, display)
         if residuals is not None:
@@ -361,23 +361,163 @@ def at_adjust(block, calibrate, gps_sigma, no_gps, threshold, no_robust, restart
             click.echo(f"{what}: {path}", err=as_json)
 
 
+@at.command("gcp")
+@click.argument("block", type=_block)
+@click.option(
+    "--measure",
+    "measure_file",
+    type=_in_file,
+    default=None,
+    metavar="FILE.csv",
+    help="Measurements: point,image,x_px,y_px,mode[,sigma_px] (mode precise, approx or manual).",
+)
+@click.option("--point", default=None, help="One measurement from the command line: the point.")
+@click.option("--image", type=int, default=None, help="... its image number.")
+@click.option("--xy", default=None, metavar="X,Y", help="... its pixel position (col,row).")
+@click.option(
+    "--mode",
+    type=click.Choice(["precise", "approx", "manual"]),
+    default="precise",
+    show_default=True,
+    help="... how it was digitised.",
+)
+@click.option(
+    "--auto",
+    "automatic",
+    is_flag=True,
+    help="Predict every point digitised precisely in one image in all the others and measure "
+    "it there by least-squares matching.",
+)
+@click.option("--guide", "guidance", is_flag=True, help="List the control points not measured "
+              "yet with their predicted image positions.")  # fmt: skip
+@click.option(
+    "--thumbnails",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="With --guide: a PNG of the image around each predicted position, into this folder.",
+)
+@click.option(
+    "--corr-min",
+    type=click.FloatRange(0.3, 0.99),
+    default=0.8,
+    show_default=True,
+    help="Least correlation of a least-squares match.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@run_guarded
+def at_gcp(block, measure_file, point, image, xy, mode, automatic, guidance, thumbnails,
+           corr_min, as_json):  # fmt: skip
+    """Measure control and new points in the images of BLOCK (manual, semi-automatic or
+    automatic), or list the control points still to measure (--guide)."""
+    from apygis.aerotri.gcp import Measurement, guide, measure, read_measurements
+
+    ms = read_measurements(measure_file) if measure_file is not None else []
+    if point is not None or image is not None or xy is not None:
+        if point is None or image is None or xy is None:
+            raise click.UsageError("--point, --image and --xy go together")
+        try:
+            x, y = (float(v) for v in xy.split(","))
+        except ValueError:
+            raise click.BadParameter(f"{xy!r}: expected X,Y (pixels)", param_hint="--xy") from None
+        ms.append(Measurement(point, image, x, y, mode))
+    if guidance:
+        with _open(block) as b:
+            g = guide(b, thumbnails=thumbnails)
+        if as_json:
+            click.echo(json.dumps(g, indent=1))
+            return
+        if not g:
+            click.echo("every control point with coordinates is measured")
+        for p in g:
+            click.echo(f"{p['point']} ({p['kind']}), predicted by the {p['prediction']}:")
+            for e in p["images"]:
+                t = f"  {e['thumbnail']}" if "thumbnail" in e else ""
+                click.echo(f"  image {e['image']:>6}  x {e['x_px']:9.1f}  y {e['y_px']:9.1f}  "
+                           f"+- {e['uncertainty_px']:.0f} px{t}")  # fmt: skip
+        return
+    if not ms and not automatic:
+        raise click.UsageError("nothing to do: give --measure FILE, --point/--image/--xy, "
+                               "--auto or --guide")  # fmt: skip
+    if automatic and not ms:
+        ms = _precise_measurements(block)
+    with _open(block) as b, _bar(f"measuring {len(ms)} measurements") as bar:
+        r = measure(b, ms, automatic=automatic, corr_min=corr_min, progress=_advance(bar))
+    if as_json:
+        click.echo(json.dumps({"stored": [dict(zip(("point", "image", "x_px", "y_px",
+                               "sigma_px", "source", "corr"), s, strict=True))
+                               for s in r.stored], "failed": [dict(zip(("point", "image",
+                               "reason"), f, strict=True)) for f in r.failed],
+                               "new_points": r.new_points}, indent=1))  # fmt: skip
+        return
+    for name, img, x, y, s, src, c in r.stored:
+        extra = f"  corr {c:.3f}" if c is not None else ""
+        click.echo(f"{name:>12} {img:>6}  x {x:10.2f}  y {y:10.2f}  sigma {s:.3f} px  {src}"
+                   f"{extra}")  # fmt: skip
+    for name, img, why in r.failed:
+        click.echo(f"{name:>12} {img:>6}  not measured: {why}")
+    if r.new_points:
+        click.echo(f"new points: {', '.join(r.new_points)}")
+    click.echo(f"{len(r.stored)} measurements stored, {len(r.failed)} failed")
+
+
+def _precise_measurements(block: Path):
+    """The stored precise (manual) measurements of control and new points: --auto alone
+    measures them in the other images."""
+    from apygis.aerotri.gcp import Measurement
+
+    with _open(block) as b:
+        rows = b.conn.execute(
+            "SELECT p.name, o.image, o.x_px, o.y_px, o.sigma_px FROM observations o JOIN points "
+            "p ON p.id = o.point WHERE o.source = 'manual' ORDER BY p.name, o.sigma_px"
+        ).fetchall()
+    seen: dict[str, object] = {}
+    for name, img, x, y, s in rows:
+        seen.setdefault(name, Measurement(name, img, x, y, "precise", s))
+    if not seen:
+        raise click.UsageError(
+            f"{block}: no point is digitised precisely yet (--measure or --point/--xy first)"
+        )
+    return list(seen.values())
+
+
 @at.command("export")
 @click.argument("block", type=_block)
 @click.option(
     "--tiepoints",
     type=_picture,
-    required=True,
+    default=None,
     metavar="FILE.csv",
     help="Tie point observations: point,image,x_px,y_px,x_mm,y_mm,sigma_px.",
 )
+@click.option(
+    "--points",
+    type=_picture,
+    default=None,
+    metavar="FILE.csv",
+    help="Adjusted points: point,kind,X,Y,Z,sX,sY,sZ,rays.",
+)
+@click.option(
+    "--exterior",
+    type=_picture,
+    default=None,
+    metavar="FILE.csv",
+    help="Exterior orientations with their standard deviations.",
+)
 @run_guarded
-def at_export(block, tiepoints):
-    """Export the tie point observations of BLOCK."""
+def at_export(block, tiepoints, points, exterior):
+    """Export the observations, adjusted points or orientations of BLOCK."""
+    from apygis.aerotri.adjust_report import export_exterior, export_points
     from apygis.aerotri.report import export_tiepoints
 
+    if tiepoints is None and points is None and exterior is None:
+        raise click.UsageError("nothing to export: give --tiepoints, --points or --exterior")
     with _open(block) as b:
-        n = export_tiepoints(b, tiepoints)
-    click.echo(f"{tiepoints}: {n} observations")
+        if tiepoints is not None:
+            click.echo(f"{tiepoints}: {export_tiepoints(b, tiepoints)} observations")
+        if points is not None:
+            click.echo(f"{points}: {export_points(b, points)} points")
+        if exterior is not None:
+            click.echo(f"{exterior}: {export_exterior(b, exterior)} images")
 
 
 @at.command("info")

@@ -232,6 +232,8 @@ class BundleSolution:
     of the free calibration parameters (rows ``calibration_names``) and
     ``calibration_eo_corr`` their largest absolute correlation with any
     orientation element. ``ctrl_residuals`` ``(C, 3)`` ``X - X_ctrl``.
+    ``obs_sigma`` the a priori sigmas used (mm; scaled by variance components
+    in :func:`robust_adjust`), ``variance_factors`` those components by group.
     """
 
     eo: np.ndarray
@@ -254,6 +256,8 @@ class BundleSolution:
     calibration_eo_corr: np.ndarray
     ctrl_residuals: np.ndarray
     gps_residuals: np.ndarray
+    obs_sigma: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    variance_factors: dict[int, float] = field(default_factory=dict)
 
     @property
     def xyz_std(self) -> np.ndarray:
@@ -858,6 +862,7 @@ def _solution(pb, lay, st, cols, sel, eo, xyz, cal, f, Je, Jp, Jc, weight, it, c
         calibration_eo_corr=eo_corr,
         ctrl_residuals=ctrl_res,
         gps_residuals=gps_res,
+        obs_sigma=pb.obs_sigma.copy(),
     )
 
 
@@ -1046,8 +1051,9 @@ def robust_adjust(
     problem: BundleProblem,
     *,
     threshold: float = SNOOPING_THRESHOLD,
-    max_rounds: int = 12,
+    max_rounds: int = 16,
     max_iter: int = 30,
+    groups: np.ndarray | None = None,
     progress=None,
 ) -> tuple[BundleSolution, list[Rejection]]:
     """Adjust and reject gross errors by iterated data snooping, then a final least squares.
@@ -1075,8 +1081,10 @@ def robust_adjust(
     from its rays, and it is the control that must go, not the rays (it
     becomes a tie point). Rounds go on until nothing more
     is rejected; the last round is the final least-squares adjustment without
-    the rejected observations. Returns the solution and the rejections in the
-    order found. ``progress(done, total)`` counts rounds.
+    the rejected observations; should a round's rejections leave part of the
+    block undetermined (a weak block losing its only control rays), they are
+    taken back and the round before is the result. Returns the solution and the
+    rejections in the order found. ``progress(done, total)`` counts rounds.
     """
     pb = problem
     N = len(pb.obs_image)
@@ -1084,14 +1092,39 @@ def robust_adjust(
     rejected: list[Rejection] = []
     work = pb
     sol = None
+    sigma = pb.obs_sigma.copy()
+    factors: dict[int, float] = {}
+    if groups is not None:
+        groups = np.asarray(groups, np.int64).ravel()
+        factors = {int(g): 1.0 for g in np.unique(groups)}
+    vce_done = 0
+    prev: tuple | None = None
     for rnd in range(1, max_rounds + 1):
-        sol = adjust(work, weight=weight, max_iter=max_iter)
+        try:
+            sol = adjust(work, weight=weight, max_iter=max_iter)
+        except DegenerateGeometryError:
+            if prev is None:
+                raise
+            # the last round's rejections left part of the block undetermined: they are
+            # taken back and the round before is the result
+            sol, rejected, sigma, factors = prev
+            break
         if progress is not None:
             progress(rnd, max_rounds)
         level = threshold * max(4.0 / 2 ** (rnd - 1), 1.0)
         found = _snoop(work, sol, weight, level, rnd, robust_scale=level > threshold)
-        if not found and level <= threshold:
+        rescaled = False
+        if groups is not None and not found and level <= threshold and vce_done < VCE_ROUNDS:
+            k = _variance_components(sol, weight, groups)
+            if any(abs(v - 1.0) > 0.05 for v in k.values()):
+                for g, v in k.items():
+                    sigma[groups == g] *= v
+                    factors[g] *= v
+                rescaled = True
+                vce_done += 1
+        if not found and not rescaled and level <= threshold:
             break
+        prev = (sol, list(rejected), sigma.copy(), dict(factors))
         rejected += found
         cs = work.ctrl_sigma.copy()
         for r in found:
@@ -1109,7 +1142,7 @@ def robust_adjust(
             obs_image=pb.obs_image,
             obs_point=pb.obs_point,
             obs_xy=pb.obs_xy,
-            obs_sigma=pb.obs_sigma,
+            obs_sigma=sigma,
             free=pb.free,
             calibration_sigma=pb.calibration_sigma,
             ctrl_point=pb.ctrl_point,
@@ -1128,9 +1161,31 @@ def robust_adjust(
             "snooping; the block has more gross errors than the tests can separate"
         )
     assert sol is not None
+    sol.variance_factors = factors
+    sol.obs_sigma = sigma
     if progress is not None:
         progress(max_rounds, max_rounds)
     return sol, rejected
+
+
+#: At most this many variance component steps in :func:`robust_adjust`.
+VCE_ROUNDS = 5
+
+
+def _variance_components(sol: BundleSolution, weight, groups) -> dict[int, float]:
+    """Per group ``k = sqrt(sum f^2 / sum r)`` over its observations with weight (groups with
+    a redundancy below 10 keep 1: too few to estimate)."""
+    used = weight > 0
+    out = {}
+    for g in np.unique(groups):
+        m = used & (groups == g)
+        r = float(np.nansum(sol.redundancy[m]))
+        if r < 10:
+            out[int(g)] = 1.0
+            continue
+        ff = sol.residuals[m] / sol.obs_sigma[m]
+        out[int(g)] = float(np.sqrt(np.sum(ff * ff) / r))
+    return out
 
 
 def _snoop(
