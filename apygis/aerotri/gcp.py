@@ -49,6 +49,7 @@ import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -170,7 +171,7 @@ class _Block:
                 "SELECT id, name, kind, X, Y, Z FROM points"
             )
         }
-        self._pyr: dict[int, object] = {}
+        self._pyr: dict[int, Any] = {}
 
     def pyramid(self, n: int):
         from apygis.aerotri.pyramid import PyramidSource
@@ -186,7 +187,7 @@ class _Block:
 
     def close(self) -> None:
         for p in self._pyr.values():
-            p.close()  # type: ignore[attr-defined]
+            p.close()
 
     def project(self, n: int, XYZ: np.ndarray) -> tuple[np.ndarray, bool]:
         """Pixel position of ground points in image ``n`` by its adjusted orientation (with the
@@ -291,7 +292,7 @@ def _lsm(bk: _Block, ref: int, ref_px, img: int, approx_px, A, err_px, half, cor
     from apygis.aerotri.lsm import LsmReason, track
 
     src_r, src_s = bk.pyramid(ref), bk.pyramid(img)
-    levels = min(src_r.levels, src_s.levels)  # type: ignore[attr-defined]
+    levels = min(src_r.levels, src_s.levels)
     start = int(min(max(math.ceil(math.log2(max(err_px, 1.0) / 2.0)), 0), levels - 1))
     res = track(
         src_r, src_s, np.atleast_2d(ref_px), full_to_level(np.atleast_2d(approx_px), start),
@@ -482,8 +483,8 @@ def guide(block: Block, *, thumbnails=None, size_px: int = 128) -> list[dict]:
                 p = px[0] if px.ndim == 2 else px
                 if not front or not (0 <= p[0] <= im.width - 1 and 0 <= p[1] <= im.height - 1):
                     continue
-                entry = {"image": n, "x_px": float(p[0]), "y_px": float(p[1]),
-                         "uncertainty_px": err}  # fmt: skip
+                entry: dict[str, object] = {"image": n, "x_px": float(p[0]),
+                                            "y_px": float(p[1]), "uncertainty_px": err}  # fmt: skip
                 if thumbnails is not None:
                     entry["thumbnail"] = str(_thumbnail(bk, name, n, p, err, Path(thumbnails),
                                                         size_px))  # fmt: skip
@@ -527,11 +528,11 @@ def _thumbnail(bk: _Block, name: str, n: int, p, err: float, folder: Path, size:
     from apygis.fileio import atomic_write
 
     src = bk.pyramid(n)
-    levels = src.levels  # type: ignore[attr-defined]
+    levels = src.levels
     level = int(min(max(math.ceil(math.log2(max(4 * err, size) / size)), 0), levels - 1))
     c = full_to_level(np.array([p]), level)[0]
     half = size // 2
-    win = src.read(level, int(c[0]) - half, int(c[1]) - half, size, size)  # type: ignore[attr-defined]
+    win = src.read(level, int(c[0]) - half, int(c[1]) - half, size, size)
     fig = Figure(figsize=(2.4, 2.6))
     ax = fig.add_axes((0.02, 0.08, 0.96, 0.84))
     x0, y0 = int(c[0]) - half, int(c[1]) - half
