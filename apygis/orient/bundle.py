@@ -640,8 +640,10 @@ class _Factor:
     def solve(self, b):
         return self.scale * self.lu.solve(self.scale * b)
 
-    def inverse(self) -> np.ndarray:
-        """``S^-1`` (dense): Cholesky factor and its inverse (LAPACK ``dpotrf``, ``dpotri``)."""
+    def inverse_lower(self) -> np.ndarray:
+        """The lower triangle of the *scaled* ``S^-1`` (dense; the upper triangle holds
+        rubbish): Cholesky factor and its inverse (LAPACK ``dpotrf``, ``dpotri``).
+        ``S^-1[r, c] = L[max(r, c), min(r, c)] * scale[r] * scale[c]``."""
         import scipy.linalg as la
 
         A = self.Ss.toarray()
@@ -650,10 +652,6 @@ class _Factor:
             c, info = la.lapack.dpotri(c, lower=1, overwrite_c=1)
         if info != 0:
             raise DegenerateGeometryError("bundle: the reduced normal matrix is singular")
-        iu = np.triu_indices(self.n, 1)
-        c[iu] = c.T[iu]  # the lower triangle holds the inverse
-        c *= self.scale[:, None]
-        c *= self.scale[None, :]
         return c
 
     def columns(self, cols: np.ndarray) -> np.ndarray:
@@ -696,7 +694,7 @@ def adjust(
     weight: np.ndarray | None = None,
     max_iter: int = 30,
     tol: float = 1.0,
-    covariance: bool = True,
+    covariance: bool | str = True,
     progress=None,
 ) -> BundleSolution:
     """Adjust the bundle (module docstring): Gauss-Newton with Levenberg-Marquardt damping.
@@ -706,7 +704,11 @@ def adjust(
     update is below ``tol`` times 0.01 mm (ground points, centres), 0.1 urad
     (angles) and 1e-7 (calibration), or the cost no longer falls and the
     update is below a thousand times that.
-    ``covariance=False`` skips the precisions (and the redundancy numbers).
+    ``covariance=False`` skips the precisions (and the redundancy numbers);
+    ``covariance="approximate"`` computes the points' and the observations' as if
+    the orientations were known (cheap; optimistic for the points, a little
+    pessimistic for the redundancy numbers: what data snooping needs to find
+    large errors), and no orientation precisions.
     ``progress(done, total)`` (:mod:`apygis.progress`) counts iterations
     (``total`` is ``max_iter``; the last call is ``(max_iter, max_iter)``).
     """
@@ -809,7 +811,18 @@ def _solution(pb, lay, st, cols, sel, eo, xyz, cal, f, Je, Jp, Jc, weight, it, c
     w_obs = np.full(N, np.nan)
     test_stat = np.full(N, np.nan)
     test_df = np.zeros(N, np.int64)
-    if covariance:
+    if covariance == "approximate":
+        # the orientations taken as known: point cofactors V^-1, redundancy from the points
+        nm = _normals(pb, lay, st, cols, sel, f, Je, Jp, Jc, eo, xyz, cal, weight, 0.0)
+        s2 = sigma0**2 if dof > 0 else 1.0
+        xyz_cov = nm.Vinv * s2
+        B = Jp * np.sqrt(weight)[:, None, None]
+        qvv = np.eye(2)[None] - np.einsum("nai,nij,nbj->nab", B, nm.Vinv[pb.obs_point], B)
+        qvv[~used] = np.nan
+        red = np.einsum("naa->na", qvv)
+        test_stat, test_df = _observation_test(f * np.sqrt(weight)[:, None], qvv)
+        w_obs = normal_deviate(test_stat / s2, test_df)
+    elif covariance:
         nm = _normals(pb, lay, st, cols, sel, f, Je, Jp, Jc, eo, xyz, cal, weight, 0.0)
         fac = _Factor(nm.S)
         s2 = sigma0**2 if dof > 0 else 1.0
@@ -890,7 +903,8 @@ class _BlockLookup:
     def __init__(self, fac: _Factor):
         self.fac = fac
         self.G = fac.n
-        self.dense = fac.inverse() if fac.n <= DENSE_COVARIANCE_MAX else None
+        self.scale = fac.scale
+        self.dense = fac.inverse_lower() if fac.n <= DENSE_COVARIANCE_MAX else None
         self.cols: dict[int, np.ndarray] = {}
 
     def _ensure(self, cols: np.ndarray) -> None:
@@ -903,14 +917,14 @@ class _BlockLookup:
 
     def diag(self) -> np.ndarray:
         if self.dense is not None:
-            return np.diag(self.dense).copy()
+            return np.diag(self.dense) * self.scale**2
         self._ensure(np.arange(self.G))
         return np.array([self.cols[c][c] for c in range(self.G)])
 
     def gather(self, r: np.ndarray, c: np.ndarray) -> np.ndarray:
         r, c = np.broadcast_arrays(r, c)
         if self.dense is not None:
-            return self.dense[r, c]
+            return self.dense[np.maximum(r, c), np.minimum(r, c)] * self.scale[r] * self.scale[c]
         self._ensure(c)
         out = np.empty(r.shape)
         flat_r, flat_c, o = r.ravel(), c.ravel(), out.reshape(-1)
@@ -1099,9 +1113,16 @@ def robust_adjust(
         factors = {int(g): 1.0 for g in np.unique(groups)}
     vce_done = 0
     prev: tuple | None = None
+    exact = False
     for rnd in range(1, max_rounds + 1):
+        level = threshold * max(4.0 / 2 ** (rnd - 1), 1.0)
         try:
-            sol = adjust(work, weight=weight, max_iter=max_iter)
+            # while errors are sought, the redundancy with the orientations known is enough
+            # (and far cheaper) and the iterations may stop at 0.1 mm; once nothing more is
+            # found, an exact round (which may still find some) ends it
+            sol = adjust(work, weight=weight, max_iter=max_iter,
+                         covariance=True if exact else "approximate",
+                         tol=1.0 if exact else 10.0)  # fmt: skip
         except DegenerateGeometryError:
             if prev is None:
                 raise
@@ -1111,7 +1132,6 @@ def robust_adjust(
             break
         if progress is not None:
             progress(rnd, max_rounds)
-        level = threshold * max(4.0 / 2 ** (rnd - 1), 1.0)
         found = _snoop(work, sol, weight, level, rnd, robust_scale=level > threshold)
         rescaled = False
         if groups is not None and not found and level <= threshold and vce_done < VCE_ROUNDS:
@@ -1123,7 +1143,9 @@ def robust_adjust(
                 rescaled = True
                 vce_done += 1
         if not found and not rescaled and level <= threshold:
-            break
+            if exact:
+                break
+            exact = True
         prev = (sol, list(rejected), sigma.copy(), dict(factors))
         rejected += found
         cs = work.ctrl_sigma.copy()
