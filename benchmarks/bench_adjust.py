@@ -83,19 +83,16 @@ def run_pycolmap(sb) -> dict:
     opts.refine_focal_length = False
     opts.refine_principal_point = False
     opts.refine_extra_params = False
-    before = rec.compute_mean_reprojection_error()
     t = time.perf_counter()
     pycolmap.bundle_adjustment(rec, opts)
     seconds = time.perf_counter() - t
-    return {
-        "seconds": seconds,
-        "rms_before_px": before,
-        "rms_after_px": rec.compute_mean_reprojection_error(),
-    }
+    rec.update_point_3d_errors()
+    return {"seconds": seconds, "rms_after_px": rec.compute_mean_reprojection_error()}
 
 
 def run_apygis(sb) -> dict:
     pb = sb.problem
+    adjust(simulate_block(2, 3, points_per_image=50, seed=1).problem)  # imports, caches
     t = time.perf_counter()
     sol = adjust(pb, covariance=False)
     seconds = time.perf_counter() - t

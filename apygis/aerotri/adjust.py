@@ -339,7 +339,9 @@ def load_problem(block: Block, options: AdjustOptions | None = None) -> Loaded:
             "centres (--gps-sigma)"
         )
     # approximate values
-    eo0 = _approximate_eo(block, images, image_list, cams, opt)
+    cam_of_image = np.array([cam_index[images[n].camera] for n in image_list], np.int64)
+    chain_data = (xy, oi, op, calib, cam_of_image, ctrl_pt, ctrl_xyz, ctrl_sig)
+    eo0 = _approximate_eo(block, images, image_list, cams, opt, chain_data, notes)
     P = len(point_ids)
     R = rotation_matrix(eo0[:, 3], eo0[:, 4], eo0[:, 5])
     k_obs = np.array([cam_index[images[n].camera] for n in image_list], np.int64)[oi]
@@ -430,7 +432,8 @@ def _terrain(block: Block) -> float:
         return 0.0
 
 
-def _approximate_eo(block: Block, images, image_list, cams, opt: AdjustOptions) -> np.ndarray:
+def _approximate_eo(block: Block, images, image_list, cams, opt: AdjustOptions, chain_data,
+                    notes: list[str]) -> np.ndarray:  # fmt: skip
     """Approximate exterior orientations (module docstring), ``(M, 6)``."""
     M = len(image_list)
     eo = np.full((M, 6), np.nan)
@@ -462,13 +465,149 @@ def _approximate_eo(block: Block, images, image_list, cams, opt: AdjustOptions) 
             Z = tz + cam.focal_mm * 10.0  # unknown flying height: 1:10 000
         eo[k] = (im.X, im.Y, Z, 0.0, 0.0, math.radians(90.0 - az))
     if np.isnan(eo).any():
-        missing = [image_list[k] for k in np.nonzero(np.isnan(eo).any(axis=1))[0]]
-        raise BlockError(
-            f"{block.path}: images {missing[:10]} have no approximate projection centre; "
-            "give X, Y, Z in the image list (a block without any is oriented by a chain of "
-            "relative orientations: see 'apygis at adjust --help')"
+        n_missing = int(np.isnan(eo).any(axis=1).sum())
+        chained = _chain(block, image_list, eo, *chain_data)
+        notes.append(
+            f"{n_missing} images had no approximate projection centre: the block was put "
+            "together by a chain of relative orientations and placed by an absolute "
+            f"orientation on {chained}"
         )
     return eo
+
+
+def _chain(block: Block, image_list, eo, xy, oi, op, calib, cam_of_image, ctrl_pt, ctrl_xyz,
+           ctrl_sig) -> str:  # fmt: skip
+    """Orient the block without approximate values, into ``eo`` (in place); returns what it was
+    placed on.
+
+    The image pair with the most common points is oriented relatively (coplanarity,
+    :func:`apygis.orient.relative.relative_orientation`) in a model system (left photo at
+    the origin, the base 1); their points are intersected. Then, one at a time, the image
+    that sees most of the intersected points is resected (DLT, then collinearity,
+    :func:`apygis.orient.resection.resect`; points off by more than five times the median
+    residual are left out) and the points it adds are intersected. Finally the model is
+    placed by a 3-D similarity (:func:`apygis.orient.absolute.similarity_closed_form`) on
+    the control points it holds (three or more full ones), else on the images' approximate
+    centres where three or more have one.
+    """
+    from apygis.errors import OrientationError
+    from apygis.orient.absolute import similarity_closed_form
+    from apygis.orient.collinearity import InteriorOrientation
+    from apygis.orient.relative import relative_orientation
+    from apygis.orient.resection import resect
+    from apygis.orient.rotation import angles_from_matrix
+
+    M = len(image_list)
+    P = int(op.max()) + 1 if len(op) else 0
+    ios = [InteriorOrientation(*calib[cam_of_image[k], :3]) for k in range(M)]
+    by_image = [np.nonzero(oi == k)[0] for k in range(M)]
+    pts_of = [op[o] for o in by_image]
+    # the seed pair
+    best, pair = -1, (0, 1)
+    for a in range(M):
+        sa = set(pts_of[a].tolist())
+        for b in range(a + 1, M):
+            n = len(sa.intersection(pts_of[b].tolist()))
+            if n > best:
+                best, pair = n, (a, b)
+    if best < 8:
+        raise BlockError(
+            f"{block.path}: no image pair shares 8 tie points: the block cannot be put together "
+            "without approximate projection centres"
+        )
+    a, b = pair
+    common = np.intersect1d(pts_of[a], pts_of[b])
+    xa = xy[by_image[a]][np.searchsorted(pts_of[a], common)]
+    xb = xy[by_image[b]][np.searchsorted(pts_of[b], common)]
+    keep = np.ones(len(common), bool)
+    ro = None
+    for _ in range(3):
+        try:
+            ro = relative_orientation(xa[keep], xb[keep], ios[a], ios[b])
+        except OrientationError as exc:
+            raise BlockError(
+                f"{block.path}: the relative orientation of images {image_list[a]} and "
+                f"{image_list[b]} failed ({exc})"
+            ) from None
+        res = np.abs(ro.residuals_mm)
+        bad = res > 5.0 * max(float(np.median(res)), 1e-6)
+        if not bad.any():
+            break
+        idx = np.nonzero(keep)[0]
+        keep[idx[bad]] = False
+    assert ro is not None
+    model = np.full((M, 6), np.nan)
+    model[a] = ro.left.parameters
+    model[b] = ro.right.parameters
+    xyz = _intersect_oriented(model, xy, oi, op, calib, cam_of_image, P)
+    for _ in range(M - 2):
+        known = np.isfinite(xyz).all(axis=1)
+        cand = [(int(known[pts_of[k]].sum()), k) for k in range(M) if np.isnan(model[k]).any()]
+        n, k = max(cand)
+        if n < 6:
+            missing = [image_list[j] for _, j in cand]
+            raise BlockError(
+                f"{block.path}: images {missing[:10]} share fewer than 6 points with the "
+                "images oriented so far: the chain of orientations breaks there"
+            )
+        sel = by_image[k][known[pts_of[k]]]
+        g, m = xyz[op[sel]], xy[sel]
+        use = np.ones(len(sel), bool)
+        for _ in range(3):
+            try:
+                r = resect(g[use], m[use], ios[k])
+            except OrientationError as exc:
+                raise BlockError(
+                    f"{block.path}: image {image_list[k]} could not be resected in the chain "
+                    f"({exc})"
+                ) from None
+            v = np.hypot(r.residuals_mm[:, 0], r.residuals_mm[:, 1])
+            bad = v > 5.0 * max(float(np.median(v)), 1e-6)
+            if not bad.any():
+                break
+            idx = np.nonzero(use)[0]
+            use[idx[bad]] = False
+        model[k] = r.exterior.parameters
+        xyz = _intersect_oriented(model, xy, oi, op, calib, cam_of_image, P)
+    # placing the model
+    full = [j for j, s in enumerate(ctrl_sig) if np.isfinite(s).all()]
+    mc = [(xyz[ctrl_pt[j]], ctrl_xyz[j]) for j in full if np.isfinite(xyz[ctrl_pt[j]]).all()]
+    have = [k for k in range(M) if np.isfinite(eo[k, :3]).all()]
+    if len(mc) >= 3:
+        S = similarity_closed_form([m for m, _ in mc], [g for _, g in mc])
+        what = f"{len(mc)} control points"
+    elif len(have) >= 3:
+        S = similarity_closed_form(model[have, :3], eo[have, :3])
+        what = f"the approximate centres of {len(have)} images"
+    else:
+        raise BlockError(
+            f"{block.path}: the block, put together by relative orientations, cannot be placed: "
+            "measure three or more full control points ('apygis at gcp') or give approximate "
+            "centres of three images"
+        )
+    Rs = S.rotation
+    for k in range(M):
+        C = S.forward(model[k, :3])
+        Rk = Rs @ rotation_matrix(*model[k, 3:])
+        eo[k] = (*C, *angles_from_matrix(Rk))
+    return what
+
+
+def _intersect_oriented(model, xy, oi, op, calib, cam_of_image, P) -> np.ndarray:
+    """Points intersected from the oriented images (NaN where fewer than two rays)."""
+    ok_img = np.isfinite(model).all(axis=1)
+    m = ok_img[oi]
+    xyz = np.full((P, 3), np.nan)
+    if not m.any():
+        return xyz
+    R = rotation_matrix(model[ok_img, 3], model[ok_img, 4], model[ok_img, 5])
+    Rfull = np.zeros((len(model), 3, 3))
+    Rfull[ok_img] = R
+    k = cam_of_image[oi[m]]
+    d = np.einsum("nij,nj->ni", Rfull[oi[m]], np.c_[xy[m] - calib[k, 1:3], -calib[k, 0]])
+    pts, ok = intersect_rays(model[oi[m], :3], d, op[m], P)
+    xyz[ok] = pts[ok]
+    return xyz
 
 
 def _behind(xyz, eo, R, oi, op) -> np.ndarray:

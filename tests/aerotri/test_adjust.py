@@ -218,3 +218,20 @@ def test_gross_errors_in_the_block_are_rejected_and_named(tiny_copy, tiny_block_
     moved = {(name, img) for _, img, _, _, name in pick}
     assert len(moved & found) >= 0.95 * len(moved)
     assert rep["sigma0_px"] <= 0.1
+
+
+def test_a_block_without_approximate_centres_is_chained(tiny_copy, tiny_block_dir):
+    """No projection centres at all: relative orientations, resections and an absolute
+    orientation on the control give the approximate values; the adjustment then finds the
+    truth within three of its standard deviations."""
+    truth = load_truth(tiny_block_dir / "truth.json")
+    with Block.open(tiny_copy) as b:
+        measure(b, read_measurements(tiny_block_dir / "gcp.csv"))
+        b.update_images({im.image: {"X": None, "Y": None, "Z": None} for im in b.images()})
+        rep = adjust_block(b, AdjustOptions(restart=True))
+    assert any("chain of relative orientations" in n for n in rep.notes)
+    assert not rep.gps_used
+    for e in rep.exterior:
+        t = truth.exterior[e["image"]]
+        for a, b_, s in ((e["X"], t.Xo, e["sX"]), (e["Y"], t.Yo, e["sY"]), (e["Z"], t.Zo, e["sZ"])):
+            assert abs(a - b_) <= 3 * s
