@@ -503,15 +503,39 @@ def _precise_measurements(block: Path):
     metavar="FILE.csv",
     help="Exterior orientations with their standard deviations.",
 )
+@click.option(
+    "--models",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    metavar="FOLDER",
+    help="One orientation file per stereo model (model-A-B.json) for 'apygis session'.",
+)
+@click.option(
+    "--instrument",
+    type=_in_file,
+    default=None,
+    help="With --models: an orientation file of the plotter whose map orientation and "
+    "stage motors the model files take.",
+)
+@click.option("--overwrite", is_flag=True, help="Replace existing model files.")
 @run_guarded
-def at_export(block, tiepoints, points, exterior):
-    """Export the observations, adjusted points or orientations of BLOCK."""
+def at_export(block, tiepoints, points, exterior, models, instrument, overwrite):
+    """Export the observations, adjusted points, orientations or stereo models of BLOCK."""
     from apygis.aerotri.adjust_report import export_exterior, export_points
     from apygis.aerotri.report import export_tiepoints
 
-    if tiepoints is None and points is None and exterior is None:
-        raise click.UsageError("nothing to export: give --tiepoints, --points or --exterior")
+    if all(x is None for x in (tiepoints, points, exterior, models)):
+        raise click.UsageError(
+            "nothing to export: give --tiepoints, --points, --exterior or --models"
+        )
+    if instrument is not None and models is None:
+        raise click.UsageError("--instrument goes with --models")
     with _open(block) as b:
+        if models is not None:
+            from apygis.aerotri.models import write_models
+
+            paths = write_models(b, models, instrument=instrument, overwrite=overwrite)
+            click.echo(f"{models}: {len(paths)} stereo models")
         if tiepoints is not None:
             click.echo(f"{tiepoints}: {export_tiepoints(b, tiepoints)} observations")
         if points is not None:

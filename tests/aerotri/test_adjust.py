@@ -235,3 +235,64 @@ def test_a_block_without_approximate_centres_is_chained(tiny_copy, tiny_block_di
         t = truth.exterior[e["image"]]
         for a, b_, s in ((e["X"], t.Xo, e["sX"]), (e["Y"], t.Yo, e["sY"]), (e["Z"], t.Zo, e["sZ"])):
             assert abs(a - b_) <= 3 * s
+
+
+def test_models_for_compilation(tiny_copy, tiny_block_dir, tmp_path):
+    """Every strip pair becomes an orientation file that the session's geometry loads: the
+    photos' adjusted orientations, their split into relative and absolute orientation (which
+    composes back exactly), the instrument's map orientation and stage motors; a tie point of
+    the model seen through the real-time loop lands on its measurements."""
+    from apygis.aerotri.models import split_model, stereo_models
+    from apygis.compile.oriented import OrientedGeometry
+    from apygis.orient.collinearity import ExteriorOrientation
+    from apygis.orient.io import load_orientation, save_orientation
+    from apygis.orient.realtime import MotorCalibration
+    from apygis.orient.transforms import AffineTransform
+
+    assert _run("at", "gcp", tiny_copy, "--measure", tiny_block_dir / "gcp.csv").exit_code == 0
+    assert _run("at", "adjust", tiny_copy).exit_code == 0
+    with Block.open(tiny_copy) as b:
+        models = stereo_models(b)
+        ext = {r[0]: r[1:] for r in b.conn.execute(
+            "SELECT image, X, Y, Z, omega, phi, kappa FROM exterior")}  # fmt: skip
+        X0, Y0 = np.mean([v[0] for v in ext.values()]), np.mean([v[1] for v in ext.values()])
+    assert len(models) == 4  # two strips of three images
+    # an instrument file: a map orientation over the block (5 m per tablet mm) and two stages
+    from apygis.orient.io import Orientation
+
+    inst = Orientation(
+        map_transform=AffineTransform(5.0, 0.0, X0 - 1000.0, 0.0, 5.0, Y0 - 1000.0),
+        motors=(MotorCalibration("L", step_um=2.0), MotorCalibration("R", step_um=2.0)),
+    )
+    save_orientation(inst, tmp_path / "plotter.json")
+    out = tmp_path / "models"
+    r = _run("at", "export", tiny_copy, "--models", out, "--instrument", tmp_path / "plotter.json")
+    assert r.exit_code == 0, r.output
+    assert f"{len(models)} stereo models" in r.output
+    r = CliRunner().invoke(main, ["at", "export", str(tiny_copy), "--models", str(out)])
+    assert r.exit_code == 1
+    assert "exists" in r.output
+    a, b_ = models[0]
+    o = load_orientation(out / f"model-{a}-{b_}.json")
+    assert [p.photo_id for p in o.photos] == [str(a), str(b_)]
+    left, right = o.photos[0].exterior, o.photos[1].exterior
+    split = split_model(left, right)
+    l2, r2 = split.compose()
+    np.testing.assert_allclose(l2.parameters, left.parameters, atol=1e-9)
+    np.testing.assert_allclose(r2.centre, right.centre, atol=1e-6)
+    np.testing.assert_allclose(r2.rotation, right.rotation, atol=1e-12)
+    assert o.quality["model"]["relative"]["bx"] == 1.0
+    np.testing.assert_allclose(ExteriorOrientation(*ext[a]).parameters, left.parameters)
+    geo = OrientedGeometry(o)
+    assert geo.loop is not None
+    # a tie point of the model: the loop's photo coordinates are its measurements
+    with Block.open(tiny_copy) as b:
+        row = b.conn.execute(
+            "SELECT ap.X, ap.Y, ap.Z, o1.x_mm, o1.y_mm, o2.x_mm, o2.y_mm FROM adjusted_points ap "
+            "JOIN observations o1 ON o1.point = ap.point AND o1.image = ? "
+            "JOIN observations o2 ON o2.point = ap.point AND o2.image = ? LIMIT 1", (a, b_),
+        ).fetchone()  # fmt: skip
+    u = geo.loop.update(row[0], row[1], row[2])
+    assert math.hypot(u.x_left - row[3], u.y_left - row[4]) < 0.01  # mm: a pixel is 0.27
+    assert math.hypot(u.x_right - row[5], u.y_right - row[6]) < 0.01
+    assert all(isinstance(v, int) for v in geo.plates(row[0], row[1], row[2]))
