@@ -54,11 +54,11 @@ class ModelSplit:
         """The two exterior orientations back from the split."""
         Rl = rotation_matrix(*self.left_angles_rad)
         Cl = np.array(self.left_centre)
-        left = ExteriorOrientation(*Cl, *self.left_angles_rad)
+        left = ExteriorOrientation.from_parameters([*self.left_centre, *self.left_angles_rad])
         b = np.array([1.0, self.by, self.bz])
         Cr = Cl + self.scale_m * Rl @ b
         Rr = Rl @ rotation_matrix(self.omega_rad, self.phi_rad, self.kappa_rad)
-        return left, ExteriorOrientation(*Cr, *angles_from_matrix(Rr))
+        return left, ExteriorOrientation.from_parameters([*Cr, *angles_from_matrix(Rr)])
 
     def to_dict(self) -> dict:
         return {
@@ -76,7 +76,7 @@ def split_model(left: ExteriorOrientation, right: ExteriorOrientation) -> ModelS
     docstring); refused when the base has no component along the left photo's x axis."""
     Rl = left.rotation
     b = Rl.T @ (right.centre - left.centre)
-    if abs(b[0]) < 1e-9 * max(np.linalg.norm(b), 1e-300):
+    if abs(b[0]) < 1e-9 * max(float(np.linalg.norm(b)), 1e-300):
         raise BlockError("a model whose base is across the left photo's x axis cannot be split")
     Rrel = Rl.T @ right.rotation
     om, ph, ka = angles_from_matrix(Rrel)
