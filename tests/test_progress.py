@@ -46,6 +46,7 @@ OTHERS = {
     "apygis.aerotri.match.match_block",
     "apygis.aerotri.gcp.measure",
     "apygis.aerotri.adjust.adjust_block",
+    "apygis.aerotri.sketch.sketch_points",
     "apygis.orient.bundle.adjust",
     "apygis.orient.bundle.robust_adjust",
 }
@@ -209,6 +210,7 @@ def test_aerotri_progress(tmp_path):
     from apygis.aerotri.match import MatchOptions, match_block
     from apygis.aerotri.project import init_block
     from apygis.aerotri.pyramid import build_pyramid
+    from apygis.aerotri.sketch import sketch_points
     from apygis.aerotri.synth import SynthSpec, synth_block
 
     folder = tmp_path / "b"
@@ -241,6 +243,9 @@ def test_aerotri_progress(tmp_path):
         rec = Recorder()
         adjust_block(b, progress=rec)
         check_calls(rec.calls, "adjust_block")
+        rec = Recorder()
+        sketch_points(b, tmp_path / "s.pdf", progress=rec)
+        check_calls(rec.calls, "sketch_points")
 
 
 def test_bundle_progress():

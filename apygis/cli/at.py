@@ -480,6 +480,24 @@ def _precise_measurements(block: Path):
     return list(seen.values())
 
 
+@at.command("sketch")
+@click.argument("block", type=_block)
+@click.option("-o", "--output", type=_picture, required=True, metavar="FILE.pdf",
+              help="The point sketches (PDF).")  # fmt: skip
+@click.option("--points", default="", metavar="NAMES", help="Comma list of point names "
+              "(default: every measured control and new point).")  # fmt: skip
+@run_guarded
+def at_sketch(block, output, points):
+    """Point sketches of BLOCK: one page per control or new point, with an overview and a
+    full-resolution detail of the image, the coordinates and the measurements."""
+    from apygis.aerotri.sketch import sketch_points
+
+    names = [x.strip() for x in points.split(",") if x.strip()]
+    with _open(block) as b, _bar(f"sketching {output}") as bar:
+        n = sketch_points(b, output, names=names, progress=_advance(bar))
+    click.echo(f"{output}: {n} point sketches")
+
+
 @at.command("export")
 @click.argument("block", type=_block)
 @click.option(

@@ -296,3 +296,34 @@ def test_models_for_compilation(tiny_copy, tiny_block_dir, tmp_path):
     assert math.hypot(u.x_left - row[3], u.y_left - row[4]) < 0.01  # mm: a pixel is 0.27
     assert math.hypot(u.x_right - row[5], u.y_right - row[6]) < 0.01
     assert all(isinstance(v, int) for v in geo.plates(row[0], row[1], row[2]))
+
+
+def test_point_sketches(tiny_copy, tiny_block_dir, tmp_path):
+    """One PDF page per measured control point, with its name, coordinates and images."""
+    import re
+    import shutil
+    import subprocess
+
+    assert _run("at", "gcp", tiny_copy, "--measure", tiny_block_dir / "gcp.csv").exit_code == 0
+    assert _run("at", "adjust", tiny_copy).exit_code == 0
+    out = tmp_path / "s" / "sketches.pdf"
+    r = _run("at", "sketch", tiny_copy, "-o", out)
+    assert r.exit_code == 0, r.output
+    n = int(re.search(r"(\d+) point sketches", r.output).group(1))
+    with Block.open(tiny_copy) as b:
+        measured = b.conn.execute(
+            "SELECT COUNT(DISTINCT o.point) FROM observations o JOIN points p ON p.id = o.point "
+            "WHERE p.kind != 'tie'"
+        ).fetchone()[0]
+    assert n == measured
+    data = out.read_bytes()
+    assert data.startswith(b"%PDF")
+    assert len(re.findall(rb"/Type\s*/Page\b", data)) == n
+    r = _run("at", "sketch", tiny_copy, "-o", out, "--points", "C01,NOPE")
+    assert r.exit_code == 1
+    assert "NOPE" in r.output
+    if shutil.which("pdftotext"):
+        text = subprocess.run(["pdftotext", str(out), "-"], capture_output=True, text=True).stdout
+        assert re.search(r"Point\s+C01", text)
+        assert "full control point" in text
+        assert "adjusted" in text
