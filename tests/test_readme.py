@@ -174,11 +174,12 @@ def test_readme_aerotriangulation_demo_runs_and_writes_only_under_out(tmp_path):
     block = next(b for b in _sh_blocks(text) if b.startswith("apygis at synth out/"))
     (line,) = [ln for ln in block.splitlines() if ln.strip()]
     commands = [c.strip() for c in line.split("&&")]
-    assert [c.split()[:2] for c in commands] == [
-        ["apygis", "at"],
-        ["apygis", "at"],
-        ["apygis", "at"],
-        ["apygis", "at"],
+    assert [c.split()[:3] for c in commands] == [
+        ["apygis", "at", "synth"],
+        ["apygis", "at", "init"],
+        ["apygis", "at", "match"],
+        ["apygis", "at", "gcp"],
+        ["apygis", "at", "adjust"],
     ]
     root = _sandbox(tmp_path)
     (root / "home").mkdir()
@@ -188,3 +189,4 @@ def test_readme_aerotriangulation_demo_runs_and_writes_only_under_out(tmp_path):
     assert all(p.parts[0] == "out" for p in new), sorted(map(str, new))
     assert (root / "out" / "at-demo.png").is_file()
     assert (root / "out" / "at-demo.block").is_file()
+    assert (root / "out" / "at-demo-adjust.png").is_file()
