@@ -811,9 +811,15 @@ def _solution(pb, lay, st, cols, sel, eo, xyz, cal, f, Je, Jp, Jc, weight, it, c
     w_obs = np.full(N, np.nan)
     test_stat = np.full(N, np.nan)
     test_df = np.zeros(N, np.int64)
-    if covariance == "approximate":
+    if not covariance:
+        # the damped iterations converge even without a datum: the undamped matrix must
+        # be regular for the solution to mean anything
+        nm = _normals(pb, lay, st, cols, sel, f, Je, Jp, Jc, eo, xyz, cal, weight, 0.0)
+        _Factor(nm.S)
+    elif covariance == "approximate":
         # the orientations taken as known: point cofactors V^-1, redundancy from the points
         nm = _normals(pb, lay, st, cols, sel, f, Je, Jp, Jc, eo, xyz, cal, weight, 0.0)
+        _Factor(nm.S)  # as above: no solution without a datum
         s2 = sigma0**2 if dof > 0 else 1.0
         xyz_cov = nm.Vinv * s2
         B = Jp * np.sqrt(weight)[:, None, None]

@@ -327,3 +327,24 @@ def test_point_sketches(tiny_copy, tiny_block_dir, tmp_path):
         assert re.search(r"Point\s+C01", text)
         assert "full control point" in text
         assert "adjusted" in text
+
+
+def test_subblocks_are_adjusted_as_tasks_then_joined(tiny_copy, tiny_block_dir):
+    """Each subblock is adjusted on its own (a task), the whole block then starts from their
+    results; a subblock without a datum of its own is reported and the rest goes on."""
+    assert _run("at", "gcp", tiny_copy, "--measure", tiny_block_dir / "gcp.csv").exit_code == 0
+    with Block.open(tiny_copy) as b:
+        b.set_subblocks([[1, 2], [2]])
+        rep = adjust_block(b, AdjustOptions(subblocks=True, scheduler="sync"))
+        whole = adjust_block(b, AdjustOptions(restart=True))
+    subs = {s["subblock"]: s for s in rep.subblocks}
+    assert (subs[1]["images"], subs[2]["images"]) == (6, 3)
+    assert subs[1]["sigma0"] > 0
+    # strip 2 alone holds too little control for a datum: reported, the rest goes on
+    assert "datum" in subs[2]["error"]
+    for e, w in zip(rep.exterior, whole.exterior, strict=True):
+        assert abs(e["X"] - w["X"]) < 0.1 * e["sX"]  # the same solution either way
+    r = CliRunner().invoke(main, ["at", "adjust", str(tiny_copy), "--subblocks", "--scheduler",
+                                  "sync"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert "Subblocks" in r.output
