@@ -98,6 +98,7 @@ def sim_block(
         pb.obs_image.tolist(), pb.obs_point.tolist(), pb.obs_xy.tolist(), strict=True
     ):
         n = 101 + i
+        x, y = x + cam.x0_mm, y + cam.y0_mm  # the simulation's principal point is at 0, 0
         col, row = transforms[n].to_px([[x, y]])[0].tolist()
         obs.append(ExObservation(str(1000 + j), n, x, y, col, row, 0.1))
     return ExchangeBlock(crs=crs, cameras=[cam], images=images, points=points, observations=obs)

@@ -99,7 +99,7 @@ def write_micmac(
         assert xyz is not None  # control_xyz_ok
         check_name(p.name, f3, rec, "point name")
         if p.sigma is not None:
-            sig = np.asarray(p.sigma, dtype=float).reshape(3)
+            sig = np.array(p.sigma, dtype=float).reshape(3)  # a copy: the block is not changed
         elif default_sigma_m is not None:
             sig = np.full(3, float(default_sigma_m))
             defaulted += p.kind != "check"
@@ -273,6 +273,8 @@ def _parse(path: Path) -> tuple[str, list[tuple[str, dict[str, str], int]]]:
     parser.EntityDeclHandler = refuse
     try:
         parser.Parse(data, True)
+    except LookupError as exc:  # an encoding declaration Python does not know
+        raise FormatError(f"the XML declares an unknown encoding ({exc})", path, "line 1") from None
     except expat.ExpatError as exc:
         raise FormatError(
             f"not well-formed XML ({expat.ErrorString(exc.code)})",
