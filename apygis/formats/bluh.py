@@ -284,7 +284,7 @@ def write(map_, path, progress=None) -> list:
             for nm, origin in zip(p.names, p.origins, strict=True)
         ]
         rows.append((p.photo, numbers, p.xy_mm))
-    out = atomic_write(path, encode_photo_coordinates(rows, path))
+    out = atomic_write(path, encode_photo_coordinates(rows, path), parents=True)
     if progress:
         progress(len(photos), len(photos))
     return [out]

@@ -357,7 +357,7 @@ def write(map_, path, progress=None) -> list:
     if progress:
         progress(0, len(photos))
     data = encode_image_coordinates(((p.photo, p.names, p.xy_mm) for p in photos), path)
-    out = atomic_write(path, data)
+    out = atomic_write(path, data, parents=True)
     if progress:
         progress(len(photos), len(photos))
     return [out]

@@ -100,7 +100,7 @@ def write_bluh(block: ExchangeBlock, target) -> WriteReport:
         "exterior orientations (not part of BLUH's input files)",
         sum(im.eo is not None for im in block.images),
     )
-    report.files = atomic_write_many(contents)
+    report.files = atomic_write_many(contents, parents=True)
     report.written = {"photos": len(rows), "observations": n_obs, "control points": len(control)}
     report.log("BLUH")
     return report

@@ -148,8 +148,8 @@ def write_colmap(
     distortion: str = "refuse",
     pixel_um: float | None = None,
 ) -> WriteReport:
-    """Write ``block`` as a COLMAP text model into ``folder`` (created if missing; its
-    parent must exist). See the module docstring for the conversions.
+    """Write ``block`` as a COLMAP text model into ``folder`` (created if missing, with its
+    parents). See the module docstring for the conversions.
 
     Parameters
     ----------
@@ -326,7 +326,7 @@ def write_colmap(
     if block.crs:
         report.skip("the CRS (COLMAP has none)")
     try:
-        out.mkdir(exist_ok=True)
+        out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise write_failed(out, exc) from None
     for stale in ("rigs.txt", "frames.txt"):
@@ -341,7 +341,7 @@ def write_colmap(
         files["images.txt"]: ("\n".join(img_lines) + "\n").encode(),
         files["points3D.txt"]: ("\n".join(pt_lines) + "\n").encode(),
     }
-    report.files = atomic_write_many(contents)
+    report.files = atomic_write_many(contents, parents=True)
     report.written = {
         "cameras": len(grids.cameras),
         "images": len(written),

@@ -181,9 +181,8 @@ def write_micmac(
         "exterior orientations (not part of MicMac's GCP files)",
         sum(im.eo is not None for im in block.images),
     )
-    report.files = atomic_write_many(
-        {f3: ("\n".join(out3) + "\n").encode("utf-8"), f2: ("\n".join(out2) + "\n").encode("utf-8")}
-    )
+    texts = {f3: "\n".join(out3) + "\n", f2: "\n".join(out2) + "\n"}
+    report.files = atomic_write_many({f: t.encode("utf-8") for f, t in texts.items()}, parents=True)
     report.written = {"points": len(written), "measurements": n_meas}
     report.log("MicMac")
     return report

@@ -153,7 +153,7 @@ def write_odm(block: ExchangeBlock, target) -> WriteReport:
         "exterior orientations (not part of gcp_list.txt)",
         sum(im.eo is not None for im in block.images),
     )
-    report.files = [atomic_write(path, "\n".join(lines) + "\n")]
+    report.files = [atomic_write(path, "\n".join(lines) + "\n", parents=True)]
     report.written = {"measurements": len(lines) - 1, "points": len(written_points)}
     report.log("OpenDroneMap")
     return report

@@ -117,7 +117,7 @@ def write_patb(block: ExchangeBlock, target) -> WriteReport:
         "pixel transforms (PAT-B takes photo coordinates)",
         sum(im.pixel_to_mm is not None for im in block.images),
     )
-    report.files = atomic_write_many(contents)
+    report.files = atomic_write_many(contents, parents=True)
     report.written = {
         "photos": len(rows),
         "observations": n_obs,
