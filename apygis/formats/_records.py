@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -25,6 +26,7 @@ from apygis.formats._readguard import MAX_COORD, ascii_int
 __all__ = [
     "MAX_BYTES",
     "MAX_COORD",
+    "MAX_LINES",
     "check_name",
     "fixed",
     "name",
@@ -35,41 +37,51 @@ __all__ = [
     "whole",
 ]
 
-MAX_BYTES = 256 << 20
-"""The largest bundle exchange file read (256 MiB: a block of a million observations
+MAX_BYTES = 128 << 20
+"""The largest bundle exchange file read (128 MiB: a block of a million observations
 takes about 60 MB in any of these formats)."""
+MAX_LINES = 2_000_000
+"""The most lines read from one file (readers keep an object per record: bounded memory)."""
 
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]{1,4})?", re.ASCII)
 
 
-def read_lines(path, what: str, *, max_line: int) -> list[tuple[int, str]]:
+def read_lines(path, what: str, *, max_line: int) -> Iterator[tuple[int, str]]:
     """The lines of the text file ``path`` (see :func:`text_lines`), read through the guard
     of :func:`apygis.fileio.read_bytes` (a regular file of at most :data:`MAX_BYTES`)."""
     return text_lines(read_bytes(path, what, max_bytes=MAX_BYTES), path, what, max_line=max_line)
 
 
-def text_lines(data: bytes, path, what: str, *, max_line: int) -> list[tuple[int, str]]:
+def text_lines(data: bytes, path, what: str, *, max_line: int) -> Iterator[tuple[int, str]]:
     """``(line number, text)`` of every line of UTF-8 ``data`` (``\\n`` or ``\\r\\n``; a
-    leading byte-order mark is dropped).
+    leading byte-order mark is dropped), one at a time.
 
-    Raises :class:`FormatError` naming ``path`` and the line for bytes that are not UTF-8
-    and for a line of more than ``max_line`` bytes.
+    Raises :class:`FormatError` naming ``path`` and the line for bytes that are not UTF-8,
+    a line of more than ``max_line`` bytes and more than :data:`MAX_LINES` lines (what a
+    reader keeps per line is bounded so).
 
-    >>> text_lines(b"a b\\r\\n\\n c", "f", "test", max_line=80)
+    >>> list(text_lines(b"a b\\r\\n\\n c", "f", "test", max_line=80))
     [(1, 'a b'), (2, ''), (3, ' c')]
     """
-    raw = data.split(b"\n")
-    if raw and raw[-1] == b"":
-        raw.pop()
-    out = []
-    for k, line in enumerate(raw, 1):
-        if len(line) > max_line:
+    start, k, n = 0, 0, len(data)
+    while start < n:
+        end = data.find(b"\n", start)
+        if end < 0:
+            end = n
+        k += 1
+        if k > MAX_LINES:
             raise FormatError(
-                f"a line of {len(line)} bytes is longer than the {max_line} bytes "
+                f"more than {MAX_LINES} lines, more than {what} may have", path, f"line {k}"
+            )
+        if end - start > max_line:
+            raise FormatError(
+                f"a line of {end - start} bytes is longer than the {max_line} bytes "
                 f"a line of {what} may have",
                 path,
                 f"line {k}",
             )
+        line = data[start:end]
+        start = end + 1
         if line.endswith(b"\r"):
             line = line[:-1]
         try:
@@ -82,8 +94,7 @@ def text_lines(data: bytes, path, what: str, *, max_line: int) -> list[tuple[int
             ) from None
         if k == 1 and text.startswith("\ufeff"):
             text = text[1:]
-        out.append((k, text))
-    return out
+        yield k, text
 
 
 def number(

@@ -725,3 +725,16 @@ def test_writers_leave_the_block_as_it_was(tmp_path):
     changed = copy.deepcopy(ref)
     changed.points[3].sigma[2] = -1.0
     assert not _same(changed, ref)  # the comparison does see a change
+
+
+def test_a_file_of_millions_of_lines_is_refused_not_swallowed(tmp_path):
+    """What a reader keeps per line is bounded by MAX_LINES (2 000 000 lines), and a
+    file of newlines is refused at the line past it, not read into a list first."""
+    from apygis.formats._records import MAX_LINES
+
+    f = tmp_path / "many.im"
+    f.write_bytes(b"7\n" + b"\n" * MAX_LINES)
+    with pytest.raises(
+        FormatError, match=rf"many\.im: line {MAX_LINES + 1}: more than {MAX_LINES} lines"
+    ):
+        read_patb(f)

@@ -72,6 +72,7 @@ from apygis.orient.rotation import angles_from_matrix, rotation_matrix
 
 __all__ = [
     "FILES",
+    "MAX_OBSERVATIONS",
     "MODELS",
     "read_cameras",
     "read_colmap",
@@ -86,6 +87,8 @@ MODELS = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4, "OPENCV": 8}
 MAX_ID = 2**32 - 1  # COLMAP's camera_t / image_t
 MAX_POINT_ID = 2**63 - 1  # point3D_t (uint64; kept to int64 here)
 MAX_SIZE = 1_000_000  # pixels, as apygis's camera files allow
+MAX_OBSERVATIONS = 4_000_000
+"""The most observations read from one model (an object each: bounded memory)."""
 _D = np.diag([1.0, -1.0, -1.0])
 _LINE = 1 << 16  # cameras.txt and image header lines
 _LONG_LINE = 8 << 20  # a points2D or track line: 8 MiB (some 250 000 observations)
@@ -561,10 +564,7 @@ def read_images(
     lines = text_lines(data, path, "COLMAP's images.txt", max_line=_LONG_LINE)
     out: dict[int, tuple[np.ndarray, np.ndarray, int, str, np.ndarray, np.ndarray, int]] = {}
     names: dict[str, int] = {}
-    i = 0
-    while i < len(lines):
-        k, text = lines[i]
-        i += 1
+    for k, text in lines:
         s = text.strip()
         if not s or s.startswith("#"):
             continue
@@ -596,10 +596,10 @@ def read_images(
                 f"image name {name[:40]!r} is given twice (also at line {names[name]})", path, rec
             )
         names[name] = k
-        if i >= len(lines):
+        nxt = next(lines, None)
+        if nxt is None:
             raise FormatError(f"image {iid} has no POINTS2D line: the file is truncated", path, rec)
-        k2, pts_text = lines[i]
-        i += 1
+        k2, pts_text = nxt
         tok2 = pts_text.split()
         if len(tok2) % 3:
             raise FormatError(
@@ -779,6 +779,13 @@ def read_colmap(folder, *, pixel_um, distortion: str = "refuse") -> ExchangeBloc
             )
         )  # fmt: skip
     used = {iid: np.zeros(len(uv), dtype=bool) for iid, uv in uv_of.items()}
+    total = sum(len(track) for _, track, _ in points.values())
+    if total > MAX_OBSERVATIONS:
+        raise FormatError(
+            f"the tracks hold {total} observations, more than the {MAX_OBSERVATIONS} apygis reads "
+            "from one model",
+            pt_path,
+        )
     for pid, (xyz, track, k) in points.items():
         nm = str(pid)
         block.points.append(ExPoint(nm, "tie", xyz))
