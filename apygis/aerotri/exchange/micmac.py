@@ -25,17 +25,20 @@ orientations are counted in the :class:`~apygis.aerotri.exchange.WriteReport`.
 ``read_micmac(*sources)`` reads 3-D and 2-D files (each file's kind from its root
 element), or the two files of a base name.
 
-Hostile XML: a document type declaration or an entity (``<!DOCTYPE``, ``<!ENTITY``: the
-"billion laughs") is refused before parsing; more than :data:`MAX_ELEMENTS` elements,
-unexpected structure, or a value that is not what the element holds is a
-:class:`~apygis.errors.FormatError` naming the file and the line.
+Written with :mod:`xml.etree.ElementTree`; read with expat (the parser under
+``xml.etree``) directly, record by record, for the line of every record in messages
+and handlers that refuse declarations. Hostile XML: a document type declaration or an
+entity (``<!DOCTYPE``, ``<!ENTITY``: the "billion laughs") is refused before parsing;
+more than :data:`MAX_ELEMENTS` elements, unexpected structure, or a value that is not
+what the element holds is a :class:`~apygis.errors.FormatError` naming the file and the
+line.
 """
 
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from pathlib import Path
-from xml.sax.saxutils import escape
 
 import numpy as np
 
@@ -64,6 +67,16 @@ def _f(v) -> str:
     return repr(float(v))
 
 
+def _xml(root: ET.Element) -> bytes:
+    """The document as UTF-8 with a declaration, indented by two blanks per level."""
+    ET.indent(root, space="  ")
+    return (
+        b'<?xml version="1.0" encoding="UTF-8"?>\n'
+        + ET.tostring(root, encoding="utf-8", xml_declaration=False)
+        + b"\n"
+    )
+
+
 def write_micmac(
     block: ExchangeBlock, target, *, default_sigma_m: float | None = None
 ) -> WriteReport:
@@ -83,7 +96,8 @@ def write_micmac(
     f3, f2 = base.with_name(base.name + SUFFIX_3D), base.with_name(base.name + SUFFIX_2D)
     idx = Index(block, base)
     report = WriteReport()
-    out3 = ['<?xml version="1.0" encoding="UTF-8"?>', "<Global>", "  <DicoAppuisFlottant>"]
+    root3 = ET.Element("Global")
+    dico = ET.SubElement(root3, "DicoAppuisFlottant")
     written: set[str] = set()
     defaulted = 0
     for p in block.points:
@@ -123,27 +137,24 @@ def write_micmac(
             report.skip("sigmas of coordinates a point does not control", 2 * (p.sigma is not None))
         elif p.kind == "check":
             report.skip(
-                "check point sigmas (a check point's Incertitude is -1 -1 -1)", p.sigma is not None
+                "check point sigmas (a check point's Incertitude is -1 -1 -1)",
+                int(p.sigma is not None),
             )
             sig[:] = -1.0
-        out3 += [
-            "    <OneAppuisDAF>",
-            f"      <Pt>{' '.join(_f(v) for v in pt)}</Pt>",
-            f"      <NamePt>{escape(p.name)}</NamePt>",
-            f"      <Incertitude>{' '.join(_f(v) for v in sig)}</Incertitude>",
-            "    </OneAppuisDAF>",
-        ]
+        one = ET.SubElement(dico, "OneAppuisDAF")
+        ET.SubElement(one, "Pt").text = " ".join(_f(v) for v in pt)
+        ET.SubElement(one, "NamePt").text = p.name
+        ET.SubElement(one, "Incertitude").text = " ".join(_f(v) for v in sig)
         written.add(p.name)
-    out3 += ["  </DicoAppuisFlottant>", "</Global>"]
     if defaulted:
         report.notes.append(
             f"{defaulted} control points without sigma written with Incertitude {default_sigma_m} m"
         )
-    out2 = ['<?xml version="1.0" encoding="UTF-8"?>', "<SetOfMesureAppuisFlottants>"]
+    root2 = ET.Element("SetOfMesureAppuisFlottants")
     n_meas = 0
     for image, obs in idx.by_image().items():
         im = idx.images[image]
-        rows = []
+        rows: list[tuple[str, str]] = []
         for ob in obs:
             if ob.point not in written:
                 report.skip("observations of points not in the 3-D file (tie and new points)")
@@ -158,31 +169,24 @@ def write_micmac(
                     f2,
                     f"image {image} point {ob.point!r}",
                 )
-            rows += [
-                "    <OneMesureAF1I>",
-                f"      <NamePt>{escape(ob.point)}</NamePt>",
-                f"      <PtIm>{_f(px[0])} {_f(px[1])}</PtIm>",
-                "    </OneMesureAF1I>",
-            ]
+            rows.append((ob.point, f"{_f(px[0])} {_f(px[1])}"))
             n_meas += 1
             report.skip(
                 "observation sigmas (MicMac's 2-D file has none)", int(ob.sigma_px is not None)
             )
         if rows:
             check_name(im.name, f2, f"image {image}", "image name")
-            out2 += [
-                "  <MesureAppuiFlottant1Im>",
-                f"    <NameIm>{escape(im.name)}</NameIm>",
-                *rows,
-                "  </MesureAppuiFlottant1Im>",
-            ]
-    out2.append("</SetOfMesureAppuisFlottants>")
+            one_im = ET.SubElement(root2, "MesureAppuiFlottant1Im")
+            ET.SubElement(one_im, "NameIm").text = im.name
+            for name, uv in rows:
+                mes = ET.SubElement(one_im, "OneMesureAF1I")
+                ET.SubElement(mes, "NamePt").text = name
+                ET.SubElement(mes, "PtIm").text = uv
     report.skip(
         "exterior orientations (not part of MicMac's GCP files)",
         sum(im.eo is not None for im in block.images),
     )
-    texts = {f3: "\n".join(out3) + "\n", f2: "\n".join(out2) + "\n"}
-    report.files = atomic_write_many({f: t.encode("utf-8") for f, t in texts.items()}, parents=True)
+    report.files = atomic_write_many({f3: _xml(root3), f2: _xml(root2)}, parents=True)
     report.written = {"points": len(written), "measurements": n_meas}
     report.log("MicMac")
     return report
