@@ -31,7 +31,7 @@ ALLOWED: dict[str, set[str]] = {
     "formats": FLOOR | {"model"},
     "compile": FLOOR | {"model", "orient"},
     "plot": FLOOR | {"model", "formats"},
-    "aerotri": FLOOR | {"orient"},  # aerotriangulation: blocks, imagery, matching, synthetic blocks
+    "aerotri": FLOOR | {"orient", "formats"},  # aerotriangulation; formats: bundle record layouts
     "session": FLOOR | {"model", "orient", "compile", "instrument", "formats"},
     # the graphic display: draws the model with the plot's pens, shows the engine's effects; the
     # session does not import it (the view subscribes through Session.subscribe)

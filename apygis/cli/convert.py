@@ -34,7 +34,12 @@ def _layer_map(ctx, param, value):
 
 @click.command()
 @click.argument("paths", nargs=-1, required=True, type=click.Path())
-@click.option("--to", "to_format", help="Output driver; DST is then a folder (batch mode).")
+@click.option(
+    "--to",
+    "to_format",
+    help="Output driver; DST is then a folder (batch mode), unless one SRC goes to a DST "
+    "with that driver's extension.",
+)
 @click.option("--driver", help="Output driver for a single DST (default: from its extension).")
 @click.option("--src-driver", help="Input driver (default: from content or extension).")
 @click.option("--to-crs", help="Reproject to this CRS (EPSG:XXXX, WKT, PROJ string).")
@@ -54,6 +59,7 @@ def convert(paths, to_format, driver, src_driver, to_crs, layer_map, snap, jobs,
     \b
       apygis convert samples/ZH1091 out/sheet.apa
       apygis convert --to gpkg -j 2 'in/*.dxf' in/ZH1091 out/
+      apygis convert densification/MAP out/block.patb --to patb
 
     An APY native map is named dir/ID (all layer files dir/ID.*) or dir/ID.ext
     (one layer). Nothing is overwritten without --overwrite, and only regular
@@ -81,6 +87,13 @@ def convert(paths, to_format, driver, src_driver, to_crs, layer_map, snap, jobs,
         "read_options": read_options,
     }
     sources = expand_sources(srcs)
+    # one source with --to and a DST that carries that driver's extension (and is no
+    # folder) is one file: `convert MAP out/x.patb --to patb`
+    if to_format is not None and len(sources) == 1 and not Path(dst).is_dir():
+        from apygis.formats import get_driver
+
+        if Path(dst).suffix[1:].lower() in get_driver(to_format, "w").extensions:
+            driver, to_format = to_format, None
     # one source into an existing folder is a batch of one, unless --driver names
     # the writer (shp, geojson, fgb and apy write into folders themselves)
     batch = to_format is not None or len(sources) > 1 or (Path(dst).is_dir() and not driver)
