@@ -445,7 +445,18 @@ def _approximate_eo(block: Block, images, image_list, cams, opt: AdjustOptions, 
             ).fetchall()
         }
         if prev and all(n in prev for n in image_list):
-            return np.array([prev[n] for n in image_list], float)
+            start = np.array([prev[n] for n in image_list], float)
+            if block.meta("exterior_frame") != "local":
+                return start
+            # imported orientations in a frame of their own (a COLMAP model): placed on the
+            # control, as the end of a chain of relative orientations
+            xy, oi, op, calib, cam_of_image, ctrl_pt, ctrl_xyz, ctrl_sig = chain_data
+            P = int(op.max()) + 1 if len(op) else 0
+            xyz = _intersect_oriented(start, xy, oi, op, calib, cam_of_image, P)
+            centres = _centres(images, image_list)
+            what = _place(block, centres, start, xyz, ctrl_pt, ctrl_xyz, ctrl_sig)
+            notes.append(f"the imported orientations were placed on {what}")
+            return centres
     from apygis.aerotri.project import block_plan
 
     try:
@@ -491,11 +502,9 @@ def _chain(block: Block, image_list, eo, xy, oi, op, calib, cam_of_image, ctrl_p
     centres where three or more have one.
     """
     from apygis.errors import OrientationError
-    from apygis.orient.absolute import similarity_closed_form
     from apygis.orient.collinearity import InteriorOrientation
     from apygis.orient.relative import relative_orientation
     from apygis.orient.resection import resect
-    from apygis.orient.rotation import angles_from_matrix
 
     M = len(image_list)
     P = int(op.max()) + 1 if len(op) else 0
@@ -569,7 +578,18 @@ def _chain(block: Block, image_list, eo, xy, oi, op, calib, cam_of_image, ctrl_p
             use[idx[bad]] = False
         model[k] = r.exterior.parameters
         xyz = _intersect_oriented(model, xy, oi, op, calib, cam_of_image, P)
-    # placing the model
+    return _place(block, eo, model, xyz, ctrl_pt, ctrl_xyz, ctrl_sig)
+
+
+def _place(block: Block, eo, model, xyz, ctrl_pt, ctrl_xyz, ctrl_sig) -> str:
+    """Place orientations ``model`` (``(M, 6)``, a frame of their own; points ``xyz`` in it)
+    into ``eo`` by a 3-D similarity on the control points they hold (three or more full
+    ones), else on the approximate centres of three or more images in ``eo``; returns what
+    it was placed on."""
+    from apygis.orient.absolute import similarity_closed_form
+    from apygis.orient.rotation import angles_from_matrix
+
+    M = len(model)
     full = [j for j, s in enumerate(ctrl_sig) if np.isfinite(s).all()]
     mc = [(xyz[ctrl_pt[j]], ctrl_xyz[j]) for j in full if np.isfinite(xyz[ctrl_pt[j]]).all()]
     have = [k for k in range(M) if np.isfinite(eo[k, :3]).all()]
@@ -581,9 +601,9 @@ def _chain(block: Block, image_list, eo, xy, oi, op, calib, cam_of_image, ctrl_p
         what = f"the approximate centres of {len(have)} images"
     else:
         raise BlockError(
-            f"{block.path}: the block, put together by relative orientations, cannot be placed: "
-            "measure three or more full control points ('apygis at gcp') or give approximate "
-            "centres of three images"
+            f"{block.path}: the block's orientations are in a frame of their own and cannot be "
+            "placed: measure three or more full control points ('apygis at gcp') or give "
+            "approximate centres of three images"
         )
     Rs = S.rotation
     for k in range(M):
@@ -608,6 +628,16 @@ def _intersect_oriented(model, xy, oi, op, calib, cam_of_image, P) -> np.ndarray
     pts, ok = intersect_rays(model[oi[m], :3], d, op[m], P)
     xyz[ok] = pts[ok]
     return xyz
+
+
+def _centres(images, image_list) -> np.ndarray:
+    """``(M, 6)``: the approximate centres where known (angles and the rest NaN)."""
+    out = np.full((len(image_list), 6), np.nan)
+    for k, n in enumerate(image_list):
+        im = images[n]
+        if None not in (im.X, im.Y, im.Z):
+            out[k, :3] = (im.X, im.Y, im.Z)
+    return out
 
 
 def _behind(xyz, eo, R, oi, op) -> np.ndarray:
@@ -992,6 +1022,7 @@ def _store(block: Block, ld: Loaded, sol: BundleSolution, rej, adj_id: int, repo
                 for o in range(len(pb.obs_image))
             ],
         )  # fmt: skip
+        c.execute("INSERT OR REPLACE INTO meta VALUES ('exterior_frame', 'crs')")
         c.execute(
             "UPDATE adjustments SET finished = ?, report = ? WHERE id = ?",
             (time.strftime("%Y-%m-%dT%H:%M:%S%z"), json.dumps(report.to_dict()), adj_id),

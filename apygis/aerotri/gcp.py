@@ -174,14 +174,13 @@ class _Block:
         self._pyr: dict[int, Any] = {}
 
     def pyramid(self, n: int):
-        from apygis.aerotri.pyramid import PyramidSource
+        """Image ``n``'s pyramid (built now if missing, as ``at match`` builds them)."""
+        from apygis.aerotri.pyramid import PyramidSource, build_pyramid
 
         if n not in self._pyr:
             path = self.block.pyramid_folder / f"{n}.tif"
             if not path.is_file():
-                raise BlockError(
-                    f"{self.block.path}: image {n} has no pyramid yet (run 'apygis at match')"
-                )
+                build_pyramid(self.images[n].path, path)
             self._pyr[n] = PyramidSource(path)
         return self._pyr[n]
 

@@ -67,7 +67,7 @@ def sketch_points(block: Block, path, *, names=(), detail_px: int = 96, progress
     from matplotlib.backends.backend_pdf import PdfPages
     from matplotlib.figure import Figure
 
-    from apygis.aerotri.pyramid import PyramidSource
+    from apygis.aerotri.pyramid import PyramidSource, build_pyramid
 
     path = Path(path)
     if path.suffix.lower() != ".pdf":
@@ -82,7 +82,7 @@ def sketch_points(block: Block, path, *, names=(), detail_px: int = 96, progress
         if n not in sources:
             f = block.pyramid_folder / f"{n}.tif"
             if not f.is_file():
-                raise BlockError(f"{block.path}: image {n} has no pyramid ('apygis at match')")
+                build_pyramid(images[n].path, f)
             sources[n] = PyramidSource(f)
         return sources[n]
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -371,6 +372,22 @@ def at_adjust(block, calibrate, gps_sigma, no_gps, threshold, no_robust, restart
     metavar="FILE.csv",
     help="Measurements: point,image,x_px,y_px,mode[,sigma_px] (mode precise, approx or manual).",
 )
+@click.option(
+    "--odm",
+    "odm_file",
+    type=_in_file,
+    default=None,
+    metavar="FILE",
+    help="Control points and their measurements from OpenDroneMap's gcp_list.txt.",
+)
+@click.option(
+    "--micmac",
+    "micmac_files",
+    multiple=True,
+    type=_in_file,
+    metavar="FILE",
+    help="Control points and measurements from MicMac's 3-D and 2-D GCP files.",
+)
 @click.option("--point", default=None, help="One measurement from the command line: the point.")
 @click.option("--image", type=int, default=None, help="... its image number.")
 @click.option("--xy", default=None, metavar="X,Y", help="... its pixel position (col,row).")
@@ -405,11 +422,31 @@ def at_adjust(block, calibrate, gps_sigma, no_gps, threshold, no_robust, restart
 )
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @run_guarded
-def at_gcp(block, measure_file, point, image, xy, mode, automatic, guidance, thumbnails,
-           corr_min, as_json):  # fmt: skip
+def at_gcp(block, measure_file, odm_file, micmac_files, point, image, xy, mode, automatic,
+           guidance, thumbnails, corr_min, as_json):  # fmt: skip
     """Measure control and new points in the images of BLOCK (manual, semi-automatic or
     automatic), or list the control points still to measure (--guide)."""
     from apygis.aerotri.gcp import Measurement, guide, measure, read_measurements
+
+    if odm_file is not None or micmac_files:
+        from apygis.aerotri.exchange.convert import import_control
+
+        if odm_file is not None:
+            from apygis.aerotri.exchange.odm import read_odm
+
+            xb = read_odm(odm_file)
+        else:
+            from apygis.aerotri.exchange.micmac import read_micmac
+
+            xb = read_micmac(*micmac_files)
+        with _open(block) as b:
+            imp = import_control(b, xb)
+        click.echo(f"{imp['points_added']} control points added, {imp['measurements']} "
+                   "measurements stored")  # fmt: skip
+        for what, n in imp["skipped"].items():
+            click.echo(f"left out: {n} {what}")
+        if not (measure_file or point or automatic or guidance):
+            return
 
     ms = read_measurements(measure_file) if measure_file is not None else []
     if point is not None or image is not None or xy is not None:
@@ -535,16 +572,34 @@ def at_sketch(block, output, points):
     help="With --models: an orientation file of the plotter whose map orientation and "
     "stage motors the model files take.",
 )
+@click.option("--patb", type=_picture, default=None, metavar="BASE",
+              help="PAT-B files BASE.im (image coordinates), BASE.con, BASE.ori.")  # fmt: skip
+@click.option("--bluh", type=_picture, default=None, metavar="BASE",
+              help="BLUH files BASE.pho (photo coordinates) and BASE.ctl (control).")  # fmt: skip
+@click.option("--colmap", type=click.Path(file_okay=False, path_type=Path), default=None,
+              metavar="FOLDER", help="COLMAP text model (cameras, images, points3D).")  # fmt: skip
+@click.option("--odm", type=_picture, default=None, metavar="FILE",
+              help="OpenDroneMap gcp_list.txt (control measurements).")  # fmt: skip
+@click.option("--micmac", type=_picture, default=None, metavar="BASE",
+              help="MicMac BASE_3d_gcp.xml and BASE_2d_gcp.xml.")  # fmt: skip
+@click.option("--with-rejected", is_flag=True, help="Exchange formats: also the observations "
+              "the last adjustment rejected.")  # fmt: skip
+@click.option("--renumber", is_flag=True, help="BLUH: give points whose names are not numbers "
+              "numbers from 900000001 on, listed in BASE.names.csv.")  # fmt: skip
 @click.option("--overwrite", is_flag=True, help="Replace existing model files.")
 @run_guarded
-def at_export(block, tiepoints, points, exterior, models, instrument, overwrite):
-    """Export the observations, adjusted points, orientations or stereo models of BLOCK."""
+def at_export(block, tiepoints, points, exterior, models, instrument, patb, bluh, colmap, odm,
+              micmac, with_rejected, renumber, overwrite):  # fmt: skip
+    """Export the observations, adjusted points, orientations, stereo models of BLOCK, or the
+    block in an exchange format."""
     from apygis.aerotri.adjust_report import export_exterior, export_points
     from apygis.aerotri.report import export_tiepoints
 
-    if all(x is None for x in (tiepoints, points, exterior, models)):
+    exchange = {"patb": patb, "bluh": bluh, "colmap": colmap, "odm": odm, "micmac": micmac}
+    if all(x is None for x in (tiepoints, points, exterior, models, *exchange.values())):
         raise click.UsageError(
-            "nothing to export: give --tiepoints, --points, --exterior or --models"
+            "nothing to export: give --tiepoints, --points, --exterior, --models or an "
+            "exchange format (--patb, --bluh, --colmap, --odm, --micmac)"
         )
     if instrument is not None and models is None:
         raise click.UsageError("--instrument goes with --models")
@@ -560,6 +615,97 @@ def at_export(block, tiepoints, points, exterior, models, instrument, overwrite)
             click.echo(f"{points}: {export_points(b, points)} points")
         if exterior is not None:
             click.echo(f"{exterior}: {export_exterior(b, exterior)} images")
+        if any(v is not None for v in exchange.values()):
+            _export_exchange(b, exchange, with_rejected, renumber)
+
+
+def _renumbered(xb, base: Path):
+    """A copy of ``xb`` whose points with names that are not BLUH numbers are numbered from
+    900000001 on; the mapping goes to ``BASE.names.csv``."""
+    import copy
+
+    from apygis.fileio import atomic_write
+
+    def ok(n: str) -> bool:
+        return n.isdigit() and not n.startswith("0") and 0 < int(n) <= 2147483647
+
+    taken = {int(p.name) for p in xb.points if ok(p.name)}
+    mapping, nxt = {}, 900000001
+    for p in xb.points:
+        if not ok(p.name):
+            while nxt in taken:
+                nxt += 1
+            mapping[p.name] = str(nxt)
+            taken.add(nxt)
+    if not mapping:
+        return xb
+    out = copy.deepcopy(xb)
+    for p in out.points:
+        p.name = mapping.get(p.name, p.name)
+    for o in out.observations:
+        o.point = mapping.get(o.point, o.point)
+    names = base.with_name(base.name + ".names.csv")
+    atomic_write(names, "name,number\n" + "".join(f"{k},{v}\n" for k, v in mapping.items()),
+                 parents=True)  # fmt: skip
+    click.echo(f"bluh: {len(mapping)} points renumbered, listed in {names}")
+    return out
+
+
+def _export_exchange(b, targets: dict, with_rejected: bool, renumber: bool = False) -> None:
+    from apygis.aerotri.exchange import bluh, colmap, micmac, odm, patb
+    from apygis.aerotri.exchange.convert import block_to_exchange
+
+    xb = block_to_exchange(b, rejected=with_rejected)
+    for what, n in xb.skipped.items():
+        click.echo(f"left out: {n} {what}")
+    writers: dict[str, Any] = {
+        "patb": patb.write_patb, "bluh": bluh.write_bluh, "colmap": colmap.write_colmap,
+        "odm": odm.write_odm, "micmac": micmac.write_micmac,
+    }  # fmt: skip
+    for fmt, target in targets.items():
+        if target is None:
+            continue
+        block = _renumbered(xb, Path(target)) if fmt == "bluh" and renumber else xb
+        rep = writers[fmt](block, target)
+        written = ", ".join(f"{n} {w}" for w, n in rep.written.items())
+        click.echo(f"{fmt}: {', '.join(str(f) for f in rep.files)}" +
+                   (f" ({written})" if written else ""))  # fmt: skip
+        for what, n in rep.skipped.items():
+            click.echo(f"{fmt}: left out {n} {what}")
+        for note in rep.notes:
+            click.echo(f"{fmt}: note: {note}")
+
+
+@at.command("import")
+@click.argument("block", type=_block_new)
+@click.option("--colmap", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              required=True, metavar="FOLDER", help="A COLMAP text model.")  # fmt: skip
+@click.option("--images", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              required=True, help="The folder of the model's images.")  # fmt: skip
+@click.option("--pixel-um", type=click.FloatRange(0.1, 1000.0), required=True,
+              help="The cameras' pixel pitch in micrometres (COLMAP has none).")  # fmt: skip
+@click.option("--crs", default="", help="The block CRS.")
+@click.option("--frame", type=click.Choice(["local", "crs"]), default="local", show_default=True,
+              help="The model's frame: its own (placed on the control by 'at adjust') or the "
+              "block CRS (a georeferenced model).")  # fmt: skip
+@click.option("--undistort", is_flag=True, help="Accept OPENCV cameras (their distortion "
+              "applied to the observations).")  # fmt: skip
+@click.option("--overwrite", is_flag=True, help="Replace an existing block.")
+@run_guarded
+def at_import(block, colmap, images, pixel_um, crs, frame, undistort, overwrite):
+    """Create BLOCK from a COLMAP model: cameras, images, tie points and observations, and the
+    model's poses as the adjustment's starting values."""
+    from apygis.aerotri.exchange.colmap import read_colmap
+    from apygis.aerotri.exchange.convert import import_block
+
+    xb = read_colmap(colmap, pixel_um=pixel_um,
+                     distortion="undistort" if undistort else "refuse")  # fmt: skip
+    xb.crs = crs or xb.crs
+    r = import_block(xb, block, images_folder=images, frame=frame, overwrite=overwrite)
+    click.echo(f"{block}: {r['images']} images ({r['oriented']} oriented), {r['points']} points, "
+               f"{r['observations']} observations")  # fmt: skip
+    for what, n in xb.skipped.items():
+        click.echo(f"left out: {n} {what}")
 
 
 @at.command("info")
@@ -654,5 +800,5 @@ def at_synth(folder, strips, images_per_strip, forward_overlap, side_overlap, cr
     click.echo(f"{folder}: {n} {camera} images of {size_px} px, truth in {truth}")
     click.echo(
         f"next: apygis at init {folder}.block --camera {folder}/camera.toml "
-        f"--images {folder}/images.csv --control {folder}/control.csv"
+        f"--images {folder}/images.csv --control {folder}/control.csv --crs {spec.crs}"
     )

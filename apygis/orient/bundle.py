@@ -1103,7 +1103,7 @@ def robust_adjust(
     is rejected; the last round is the final least-squares adjustment without
     the rejected observations; should a round's rejections leave part of the
     block undetermined (a weak block losing its only control rays), they are
-    taken back and the round before is the result. Returns the solution and the
+    taken back, kept for good, and the rounds go on. Returns the solution and the
     rejections in the order found. ``progress(done, total)`` counts rounds.
     """
     pb = problem
@@ -1119,6 +1119,9 @@ def robust_adjust(
         factors = {int(g): 1.0 for g in np.unique(groups)}
     vce_done = 0
     prev: tuple | None = None
+    protected = np.zeros(N, bool)
+    protected_ctrl: set[int] = set()
+    revert_left = 3
     exact = False
     for rnd in range(1, max_rounds + 1):
         level = threshold * max(4.0 / 2 ** (rnd - 1), 1.0)
@@ -1130,15 +1133,23 @@ def robust_adjust(
                          covariance=True if exact else "approximate",
                          tol=1.0 if exact else 10.0)  # fmt: skip
         except DegenerateGeometryError:
-            if prev is None:
+            if prev is None or revert_left <= 0:
                 raise
             # the last round's rejections left part of the block undetermined: they are
-            # taken back and the round before is the result
-            sol, rejected, sigma, factors = prev
-            break
+            # taken back and kept for good, and the rounds go on from before them
+            revert_left -= 1
+            _, rejected, sigma, factors, weight, work, last = prev
+            for r in last:
+                if r.obs >= 0:
+                    protected[r.obs] = True
+                else:
+                    protected_ctrl.add(r.control)
+            prev = None
+            continue
         if progress is not None:
             progress(rnd, max_rounds)
-        found = _snoop(work, sol, weight, level, rnd, robust_scale=level > threshold)
+        found = _snoop(work, sol, weight, level, rnd, robust_scale=level > threshold,
+                       protected=protected, protected_ctrl=protected_ctrl)  # fmt: skip
         rescaled = False
         if groups is not None and not found and level <= threshold and vce_done < VCE_ROUNDS:
             k = _variance_components(sol, weight, groups)
@@ -1152,7 +1163,7 @@ def robust_adjust(
             if exact:
                 break
             exact = True
-        prev = (sol, list(rejected), sigma.copy(), dict(factors))
+        prev = (sol, list(rejected), sigma.copy(), dict(factors), weight.copy(), work, found)
         rejected += found
         cs = work.ctrl_sigma.copy()
         for r in found:
@@ -1217,17 +1228,29 @@ def _variance_components(sol: BundleSolution, weight, groups) -> dict[int, float
 
 
 def _snoop(
-    pb: BundleProblem, sol: BundleSolution, weight, threshold, rnd, robust_scale: bool
+    pb: BundleProblem,
+    sol: BundleSolution,
+    weight,
+    threshold,
+    rnd,
+    robust_scale: bool,
+    protected=None,
+    protected_ctrl=frozenset(),
 ) -> list[Rejection]:
     """One round of data snooping (see :func:`robust_adjust`): per point the largest test
-    among its image observations and its control coordinates."""
+    among its image observations and its control coordinates; ``protected`` observations
+    (and control entries ``protected_ctrl``) are never rejected."""
     used = weight > 0
     j = pb.obs_point
     scale = robust_sigma0(sol, weight) if robust_scale else sol.sigma0
     w = normal_deviate(sol.test_stat / scale**2, sol.test_df)
     w = np.where(used, np.nan_to_num(w, nan=0.0), -1.0)
+    if protected is not None:
+        w = np.where(protected, np.minimum(w, 0.0), w)
     rt = np.sqrt(np.nan_to_num(sol.test_stat, nan=0.0))
     wc, tc = _control_tests(pb, sol, scale)
+    for c in protected_ctrl:
+        wc[c] = 0.0
     out: list[Rejection] = []
     # control coordinates beat their point's image observations when their test is larger
     by_point_ctrl: dict[int, int] = {}
