@@ -260,7 +260,7 @@ def adjust_display(block: Block, path, *, dpi: int = 150) -> Path:
         "JOIN points p ON p.id = a.point"
     ).fetchall()
     fig = Figure(figsize=(11, 9))
-    ax = fig.add_axes((0.08, 0.08, 0.88, 0.84))
+    ax = fig.add_axes((0.12, 0.08, 0.84, 0.84))
     strips = {im.image: im.strip for im in block.images()}
     colours = ["#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf"]
     for n, fp in fps.items():
