@@ -80,6 +80,7 @@ import numpy as np
 
 from apygis.aerotri.block import Block, BlockError
 from apygis.aerotri.camera import Camera, PixelTransform
+from apygis.errors import ConvergenceError, DegenerateGeometryError
 from apygis.orient.bundle import (
     CALIBRATION_PARAMETERS,
     SNOOPING_THRESHOLD,
@@ -151,6 +152,7 @@ class Loaded:
     sigma_ref_mm: float = 0.0  # median a priori sigma of the image observations
     groups: np.ndarray | None = None  # observation kind (index into group_names)
     group_names: list[str] = field(default_factory=list)
+    block_cameras: list[Camera] = field(default_factory=list)  # in the problem's order
 
 
 @dataclass
@@ -393,6 +395,7 @@ def load_problem(block: Block, options: AdjustOptions | None = None) -> Loaded:
         sigma_ref_mm=float(np.median(sig_mm)),
         groups=groups,
         group_names=group_names,
+        block_cameras=[cams[c] for c in cam_list],
     )
 
 
@@ -407,14 +410,10 @@ def _has_coords(info) -> bool:
 
 def _free_mask(calibrate, cams: list[Camera]) -> np.ndarray:
     mask = np.zeros((len(cams), len(CALIBRATION_PARAMETERS)), bool)
-    if not calibrate:
-        return mask
-    for k, cam in enumerate(cams):
-        if calibrate == "auto":
-            names = list(AUTO_CALIBRATION) + (["b1", "b2"] if cam.kind == "film" else [])
-        else:
-            names = list(calibrate)
-        for n in names:
+    if not calibrate or calibrate == "auto":
+        return mask  # "auto": chosen by _select_calibration, from a fixed camera
+    for k in range(len(cams)):
+        for n in calibrate:
             if n not in CALIBRATION_PARAMETERS:
                 raise BlockError(
                     f"calibration parameter {n!r} is not one of {', '.join(CALIBRATION_PARAMETERS)}"
@@ -722,43 +721,63 @@ def _solve(pb: BundleProblem, opt: AdjustOptions, groups, progress):
 
 
 def _select_calibration(ld: Loaded, opt: AdjustOptions, sol: BundleSolution, rej, progress):
-    """Fix, one at a time, the free calibration parameter most correlated with another unknown
-    until every remaining one is below :data:`CORRELATION_LIMIT`; returns notes."""
+    """Forward selection of the self-calibration (``calibrate="auto"``).
+
+    From the solution with the camera fixed, each candidate parameter
+    (:data:`AUTO_CALIBRATION`, and ``b1``, ``b2`` for film) is freed in turn together
+    with those kept so far; it is kept when the adjustment converges and its largest
+    correlation with an orientation element or a kept parameter is at most
+    :data:`CORRELATION_LIMIT`, else fixed again with a note naming the correlation.
+    Returns ``(solution, rejections, notes)``.
+    """
     pb = ld.problem
     notes = []
     weight = np.ones(len(pb.obs_image))
     for r in rej:
         if r.obs >= 0:
             weight[r.obs] = 0.0
-    rounds = int(pb.free.sum()) + 1
-    for k in range(rounds):
+    cams = ld.block_cameras
+    candidates = [
+        (k, par)
+        for k in range(len(ld.cameras))
+        for par in list(AUTO_CALIBRATION) + (["b1", "b2"] if cams[k].kind == "film" else [])
+    ]
+    for step, (cam, par) in enumerate(candidates):
         if progress is not None:
-            progress(k, rounds)
-        names = sol.calibration_names
-        if not names:
-            break
-        corr = np.abs(sol.calibration_corr.copy())
-        np.fill_diagonal(corr, 0.0)
-        worst = np.maximum(corr.max(axis=1) if len(names) > 1 else 0.0, sol.calibration_eo_corr)
-        j = int(np.argmax(worst))
-        if not worst[j] > CORRELATION_LIMIT:
-            break
-        cam, par = names[j]
-        other = (
-            "an orientation element"
-            if sol.calibration_eo_corr[j] >= (corr[j].max() if len(names) > 1 else 0)
-            else names[int(np.argmax(corr[j]))][1]
-        )
-        notes.append(
-            f"camera {ld.cameras[cam]}: {par} is not determined by this block (correlation "
-            f"{worst[j]:.2f} with {other}); fixed"
-        )
-        pb.free[cam, CALIBRATION_PARAMETERS.index(par)] = False
-        pb.calibration[cam, CALIBRATION_PARAMETERS.index(par)] = _initial(ld, cam, par)
-        pb.eo, pb.xyz = sol.eo.copy(), sol.xyz.copy()
-        sol = adjust(pb, weight=weight, max_iter=opt.max_iter)
+            progress(step, len(candidates))
+        i = CALIBRATION_PARAMETERS.index(par)
+        pb.free[cam, i] = True
+        pb.eo, pb.xyz, pb.calibration = sol.eo.copy(), sol.xyz.copy(), sol.calibration.copy()
+        why = ""
+        try:
+            trial = adjust(pb, weight=weight, max_iter=opt.max_iter)
+        except (ConvergenceError, DegenerateGeometryError) as exc:
+            trial, why = None, f"the adjustment does not settle with it ({exc})"
+        if trial is not None:
+            j = trial.calibration_names.index((cam, par))
+            corr = np.abs(trial.calibration_corr[j].copy())
+            corr[j] = 0.0
+            worst_other = float(corr.max()) if len(corr) > 1 else 0.0
+            worst_eo = float(trial.calibration_eo_corr[j])
+            if max(worst_other, worst_eo) > CORRELATION_LIMIT:
+                other = (
+                    "an orientation element"
+                    if worst_eo >= worst_other
+                    else trial.calibration_names[int(np.argmax(corr))][1]
+                )
+                why = f"correlation {max(worst_other, worst_eo):.2f} with {other}"
+        if why:
+            notes.append(
+                f"camera {ld.cameras[cam]}: {par} is not determined by this block ({why}); fixed"
+            )
+            pb.free[cam, i] = False
+            pb.calibration[cam, i] = _initial(ld, cam, par)
+            continue
+        assert trial is not None
+        sol = trial
+    pb.calibration = sol.calibration.copy()
     if progress is not None:
-        progress(rounds, rounds)
+        progress(len(candidates), len(candidates))
     return sol, rej, notes
 
 

@@ -348,3 +348,23 @@ def test_subblocks_are_adjusted_as_tasks_then_joined(tiny_copy, tiny_block_dir):
                                   "sync"])  # fmt: skip
     assert r.exit_code == 0, r.output
     assert "Subblocks" in r.output
+
+
+def test_self_calibration_auto_frees_only_what_the_block_determines(tiny_copy, tiny_block_dir):
+    """'--calibrate auto' on a two-strip block of vertical photos: the principal distance
+    and point go with the projection centres (fixed again, with the correlation named);
+    what stays free is reported with its precision and correlations."""
+    assert _run("at", "gcp", tiny_copy, "--measure", tiny_block_dir / "gcp.csv").exit_code == 0
+    r = _run("at", "adjust", tiny_copy, "--calibrate", "auto", "--json")
+    assert r.exit_code == 0, r.output
+    rep = json.loads(r.output)
+    fixed = [n for n in rep["notes"] if "is not determined by this block" in n]
+    assert fixed
+    assert any(" c is not determined" in n for n in fixed)
+    for c in rep["calibration"]:
+        assert c["std"] is not None
+        assert c["max_corr_orientation"] <= 0.9
+        assert all(abs(v) <= 0.9 for v in c["corr"].values())
+    bad = CliRunner().invoke(main, ["at", "adjust", str(tiny_copy), "--calibrate", "k9"])
+    assert bad.exit_code == 1
+    assert "k9" in bad.output
