@@ -110,6 +110,8 @@ AUTO_CALIBRATION = ("c", "x0", "y0", "k1", "k2", "p1", "p2")
 
 #: Calibration parameters correlated above this with another unknown are not determined.
 CORRELATION_LIMIT = 0.9
+#: ... and those whose change from the camera file is below this many sigmas not significant.
+SIGNIFICANCE = 3.0
 
 
 @dataclass
@@ -153,6 +155,7 @@ class Loaded:
     groups: np.ndarray | None = None  # observation kind (index into group_names)
     group_names: list[str] = field(default_factory=list)
     block_cameras: list[Camera] = field(default_factory=list)  # in the problem's order
+    calibration0: np.ndarray = field(default_factory=lambda: np.zeros((0, 10)))  # the files'
 
 
 @dataclass
@@ -396,6 +399,7 @@ def load_problem(block: Block, options: AdjustOptions | None = None) -> Loaded:
         groups=groups,
         group_names=group_names,
         block_cameras=[cams[c] for c in cam_list],
+        calibration0=calib.copy(),
     )
 
 
@@ -725,9 +729,11 @@ def _select_calibration(ld: Loaded, opt: AdjustOptions, sol: BundleSolution, rej
 
     From the solution with the camera fixed, each candidate parameter
     (:data:`AUTO_CALIBRATION`, and ``b1``, ``b2`` for film) is freed in turn together
-    with those kept so far; it is kept when the adjustment converges and its largest
+    with those kept so far; it is kept when the adjustment converges, its largest
     correlation with an orientation element or a kept parameter is at most
-    :data:`CORRELATION_LIMIT`, else fixed again with a note naming the correlation.
+    :data:`CORRELATION_LIMIT` (determined) and its change from the camera file is at
+    least :data:`SIGNIFICANCE` standard deviations (significant), else fixed again with
+    a note saying why.
     Returns ``(solution, rejections, notes)``.
     """
     pb = ld.problem
@@ -766,6 +772,17 @@ def _select_calibration(ld: Loaded, opt: AdjustOptions, sol: BundleSolution, rej
                     else trial.calibration_names[int(np.argmax(corr))][1]
                 )
                 why = f"correlation {max(worst_other, worst_eo):.2f} with {other}"
+            else:
+                dv = float(trial.calibration[cam, i]) - _initial(ld, cam, par)
+                sd = float(trial.calibration_std[cam, i])
+                if not abs(dv) >= SIGNIFICANCE * sd:
+                    notes.append(
+                        f"camera {ld.cameras[cam]}: {par} is determined but not significant "
+                        f"({dv:+.3g} +- {sd:.2g}); fixed"
+                    )
+                    pb.free[cam, i] = False
+                    pb.calibration[cam, i] = _initial(ld, cam, par)
+                    continue
         if why:
             notes.append(
                 f"camera {ld.cameras[cam]}: {par} is not determined by this block ({why}); fixed"
@@ -783,8 +800,7 @@ def _select_calibration(ld: Loaded, opt: AdjustOptions, sol: BundleSolution, rej
 
 def _initial(ld: Loaded, cam: int, par: str) -> float:
     """The camera file's value of a calibration parameter (0 for the additional ones)."""
-    i = CALIBRATION_PARAMETERS.index(par)
-    return float(ld.problem.calibration[cam, i]) if i < 3 else 0.0
+    return float(ld.calibration0[cam, CALIBRATION_PARAMETERS.index(par)])
 
 
 def _subblock_start(block: Block, ld: Loaded, opt: AdjustOptions) -> list[dict]:
@@ -969,7 +985,7 @@ def _report(block, ld: Loaded, sol: BundleSolution, rej: list[Rejection], adj_id
         i = CALIBRATION_PARAMETERS.index(par)
         calibration.append({
             "camera": ld.cameras[cam], "parameter": par, "value": sol.calibration[cam, i],
-            "std": sol.calibration_std[cam, i], "initial": pb.calibration[cam, i],
+            "std": sol.calibration_std[cam, i], "initial": ld.calibration0[cam, i],
             "max_corr_orientation": sol.calibration_eo_corr[j],
             "corr": {n2[1]: sol.calibration_corr[j, j2]
                      for j2, n2 in enumerate(sol.calibration_names) if j2 != j},

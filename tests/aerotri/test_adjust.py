@@ -359,10 +359,13 @@ def test_self_calibration_auto_frees_only_what_the_block_determines(tiny_copy, t
     assert r.exit_code == 0, r.output
     rep = json.loads(r.output)
     fixed = [n for n in rep["notes"] if "is not determined by this block" in n]
+    insignificant = [n for n in rep["notes"] if "is determined but not significant" in n]
     assert fixed
     assert any(" c is not determined" in n for n in fixed)
+    assert len(fixed) + len(insignificant) + len(rep["calibration"]) == 9  # film: b1, b2 too
     for c in rep["calibration"]:
         assert c["std"] is not None
+        assert abs(c["value"] - c["initial"]) >= 3 * c["std"]
         assert c["max_corr_orientation"] <= 0.9
         assert all(abs(v) <= 0.9 for v in c["corr"].values())
     bad = CliRunner().invoke(main, ["at", "adjust", str(tiny_copy), "--calibrate", "k9"])
