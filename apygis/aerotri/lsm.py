@@ -383,8 +383,9 @@ def lsm(
     a grossly distorted ``A``: 0.34 .. 1.1 in simulation, against < 0.12 for
     right matches at low SNR). ``noise_model=False`` leaves out the corrections of
     interpolated noise (module docstring: no pixel-locking correction, covariance
-    ``s0^2 N^-1``): cheaper, for pyramid levels that only seed the next. Returns an
-    :class:`LsmResult`; ``xy`` is the search point homologous to ``ref_xy`` itself.
+    ``s0^2 N^-1``): cheaper, but the iteration may then swing between neighbouring
+    half pixels. Returns an :class:`LsmResult`; ``xy`` is the search point homologous
+    to ``ref_xy`` itself.
     """
     ref_xy = np.asarray(ref_xy, dtype=float).reshape(-1, 2)
     n = len(ref_xy)
@@ -674,8 +675,9 @@ def track(
     not ok with that level's reason (its ``xy`` mapped to level 0). The other
     keywords are :func:`lsm`'s, at every level (``sigma_max`` in that level's
     pixels; ``affine_max`` against the previous level's ``A``; ``tol_px`` at
-    full resolution, :data:`COARSE_TOL_PX` above it, where the noise model is
-    left out too). Returns the
+    full resolution, :data:`COARSE_TOL_PX` above it). The noise model stays at
+    every level: without its correction of pixel locking the iteration can swing
+    between neighbouring half pixels and not converge. Returns the
     :class:`LsmResult` at level 0 (``iterations`` summed over levels).
     """
     ref_xy0 = np.asarray(ref_xy0, dtype=float).reshape(-1, 2)
@@ -714,11 +716,7 @@ def track(
             order = np.argsort(inv, kind="stable")
             splits = np.flatnonzero(np.diff(inv[order])) + 1
             for grp in np.split(idx_all[order], splits):
-                lv_opts = (
-                    opts
-                    if level == 0
-                    else {**opts, "tol_px": max(tol_px, COARSE_TOL_PX), "noise_model": False}
-                )
+                lv_opts = opts if level == 0 else {**opts, "tol_px": max(tol_px, COARSE_TOL_PX)}
                 r = _track_group(ref, search, level, rxy[grp], xy[grp], A[grp], half, lv_opts)
                 res.put(grp, r)
         total_iter += res.iterations
