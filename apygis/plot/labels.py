@@ -1,0 +1,411 @@
+"""Label placement: texts and spot heights placed off lines, symbols and each other.
+
+The candidate-position method (Imhof's rules as cartographic programs use
+them; Christensen, Marks & Shieber 1995 for the search):
+
+1. Every label gets ranked **candidate positions** around its anchor
+   (:func:`candidates`):
+
+   * a *point label* (a spot height's height, a control point's number)
+     sits beside its symbol: 8 positions at ``gap`` mm from the anchor,
+     right first (E, NE, SE, W, NW, SW, N, S), then the same 8 at
+     ``gap + 1.2 x cap height`` and at ``gap + 2.4 x cap height``: 24;
+   * a *text* of the map starts where the operator put it (rank 0: its
+     baseline starts at its point), then moves away from there in steps of
+     0.8 x its cap height up and down (up to 3 steps) and a third of its
+     width left and right, and to the 8 point positions around its start:
+     up to 29 candidates, ranked by how far they move it.
+
+2. Each candidate's **static conflicts** are counted: the map lines it
+   crosses, the symbols it covers (a point label never counts its own),
+   and the neat line when it does not lie wholly inside it. Soft obstacles
+   (the grid's crosses) add a small cost and are not conflicts.
+
+3. Candidates of different labels that overlap are **in conflict** with
+   each other when both are chosen.
+
+4. The search: labels with the fewest free candidates first, each takes
+   its cheapest candidate given those already placed (greedy); then
+   simulated annealing (random moves of labels in conflict, accepted by
+   the Metropolis rule with a geometric cooling schedule, seeded, so the
+   result is the same every run) improves the whole, and the best state
+   seen is kept.
+
+Cost of a placement: 1 per conflict (line, symbol, neat line, other
+label), 0.3 per soft obstacle, plus the candidate's rank cost (0.002 per
+rank step; a text's moves cost 0.01 per mm): conflicts dominate, and among
+free positions the preferred one wins.
+
+A label whose chosen position still has a conflict **could not be placed
+free**; :class:`Placement` counts them and says with what they collide.
+
+Examples
+--------
+>>> import numpy as np
+>>> reqs = [LabelRequest("A", 10.0, 10.0, 2.0, 1.4, 0.0, "point", 1.0)]
+>>> line = np.array([(11.0, 0.0), (11.0, 30.0)])  # a line right of the point
+>>> p = place_labels(reqs, [line], np.zeros((0, 4)), (0, 0, 50, 50))
+>>> bool(p.x[0] < 10.0), p.overlapping
+(True, 0)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from apygis.progress import Progress
+
+__all__ = [
+    "LabelRequest",
+    "Placement",
+    "candidates",
+    "place_labels",
+]
+
+_POINT_ORDER = ((1, 0), (1, 1), (1, -1), (-1, 0), (-1, 1), (-1, -1), (0, 1), (0, -1))
+_RANK_COST = 0.002
+_MOVE_COST = 0.01  # per mm a text moves from where it was put
+_SOFT_COST = 0.3
+_SA_SEED = 20240612
+
+
+@dataclass(frozen=True)
+class LabelRequest:
+    """A label to place.
+
+    Attributes
+    ----------
+    text : str
+        What it says (for reports).
+    x, y : float
+        The anchor, mm: a point label's symbol centre, a text's point (the
+        start of its baseline as compiled).
+    height : float
+        Cap height, mm.
+    width, descent : float
+        The text's ink width and its depth below the baseline, mm
+        (:func:`apygis.plot.fonts.text_size`).
+    kind : str
+        ``"point"`` or ``"text"``.
+    gap : float
+        Room between the anchor and a point label (the symbol's half size
+        plus a little), mm.
+    own : int
+        Index of the label's own symbol among the obstacle boxes (-1: none).
+    """
+
+    text: str
+    x: float
+    y: float
+    height: float
+    width: float
+    descent: float
+    kind: str
+    gap: float = 0.0
+    own: int = -1
+
+
+@dataclass
+class Placement:
+    """Where the labels went.
+
+    Attributes
+    ----------
+    x, y : ndarray
+        Start of each label's baseline, mm.
+    rank : ndarray of int
+        The chosen candidate's rank (0: the preferred position).
+    lines, symbols, labels, frame : ndarray of int
+        What each label's position still collides with: map lines crossed,
+        symbols covered, other labels overlapped, and 1 where it crosses the
+        neat line.
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    rank: np.ndarray
+    lines: np.ndarray
+    symbols: np.ndarray
+    labels: np.ndarray
+    frame: np.ndarray
+    cost: float = 0.0
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def free(self) -> np.ndarray:
+        """True where a label collides with nothing."""
+        return (self.lines + self.symbols + self.labels + self.frame) == 0
+
+    @property
+    def overlapping(self) -> int:
+        """Number of labels that could not be placed free."""
+        return int((~self.free).sum())
+
+    @property
+    def moved(self) -> int:
+        """Number of labels not at their preferred position."""
+        return int((self.rank > 0).sum())
+
+
+def candidates(req: LabelRequest) -> tuple[np.ndarray, np.ndarray]:
+    """The candidate baselines ``(k, 2)`` (start x, y in mm) and their costs ``(k,)``, best first.
+
+    >>> xy, cost = candidates(LabelRequest("12", 0.0, 0.0, 2.0, 2.0, 0.0, "point", 1.0))
+    >>> xy[0].tolist(), len(xy)
+    ([1.0, -1.0], 24)
+    """
+    h, w, d = req.height, req.width, req.descent
+    out: list[tuple[float, float]] = []
+    cost: list[float] = []
+
+    def around(gap: float, base_cost: float, ax: float, ay: float) -> None:
+        for ux, uy in _POINT_ORDER:
+            g = gap * (0.7 if ux and uy else 1.0)
+            if ux == 1:
+                x0 = ax + g
+            elif ux == -1:
+                x0 = ax - g - w
+            else:
+                x0 = ax - w / 2.0
+            if uy == 1:
+                base = ay + g + d
+            elif uy == -1:
+                base = ay - g - h
+            else:
+                base = ay - h / 2.0
+            out.append((x0, base))
+            cost.append(base_cost + _RANK_COST * len(cost))
+
+    if req.kind == "point":
+        for ring in range(3):
+            around(req.gap + 1.2 * h * ring, 0.05 * ring, req.x, req.y)
+    else:
+        seen = set()
+        moves = []
+        for dy in (0.0, 0.8, -0.8, 1.6, -1.6, 2.4, -2.4):
+            for dx in (0.0, -1 / 3, 1 / 3):
+                moves.append((dx * w, dy * h))
+        for dx, dy in moves:
+            key = (round(dx, 6), round(dy, 6))
+            if key in seen:
+                continue
+            seen.add(key)
+            out.append((req.x + dx, req.y + dy))
+            cost.append(_MOVE_COST * math.hypot(dx, dy))
+        # around the text's start, as a point label (to the left of it, above, below)
+        n0 = len(out)
+        around(max(req.gap, 0.5), 0.0, req.x, req.y + h / 2.0)
+        for k in range(n0, len(out)):
+            dx, dy = out[k][0] - req.x, out[k][1] - req.y
+            cost[k] = _MOVE_COST * math.hypot(dx, dy) + 0.02
+    xy = np.array(out, dtype=float)
+    c = np.array(cost, dtype=float)
+    order = np.argsort(c, kind="stable")
+    return xy[order], c[order]
+
+
+def _boxes(reqs: Sequence[LabelRequest], xy: np.ndarray, owner: np.ndarray) -> np.ndarray:
+    w = np.array([r.width for r in reqs])[owner]
+    h = np.array([r.height for r in reqs])[owner]
+    d = np.array([r.descent for r in reqs])[owner]
+    return np.column_stack([xy[:, 0], xy[:, 1] - d, xy[:, 0] + w, xy[:, 1] + h])
+
+
+def place_labels(
+    reqs: Sequence[LabelRequest],
+    lines: Sequence[np.ndarray],
+    symbols: np.ndarray,
+    frame: tuple[float, float, float, float],
+    soft: np.ndarray | None = None,
+    progress: Progress | None = None,
+) -> Placement:
+    """Place ``reqs`` avoiding ``lines``, ``symbols``, ``soft`` obstacles and each other.
+
+    Parameters
+    ----------
+    reqs : sequence of LabelRequest
+        The labels.
+    lines : sequence of ndarray
+        Map lines as polylines (n, 2) in mm.
+    symbols : ndarray
+        Symbol boxes (k, 4) ``x0, y0, x1, y1`` in mm.
+    frame : (float, float, float, float)
+        The neat line; a label must lie inside it to be free.
+    soft : ndarray, optional
+        Boxes (k, 4) that cost a little to cover (grid crosses).
+    progress : Progress, optional
+        ``progress(done, total)`` as the search goes (:mod:`apygis.progress`).
+
+    Returns
+    -------
+    Placement
+    """
+    import shapely
+
+    n = len(reqs)
+    if n == 0:
+        if progress is not None:
+            progress(0, 0)
+        e = np.zeros(0, dtype=np.int64)
+        return Placement(np.zeros(0), np.zeros(0), e, e, e, e, e)
+    cand_xy, cand_cost, owner = [], [], []
+    for i, r in enumerate(reqs):
+        xy, c = candidates(r)
+        cand_xy.append(xy)
+        cand_cost.append(c)
+        owner.append(np.full(len(xy), i))
+    xy = np.vstack(cand_xy)
+    base_cost = np.concatenate(cand_cost)
+    own = np.concatenate(owner)
+    first = np.concatenate([[0], np.cumsum([len(c) for c in cand_xy])])
+    boxes = _boxes(reqs, xy, own)
+    geoms = shapely.box(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3])
+    nc = len(boxes)
+    if progress is not None:
+        progress(1, 10)
+
+    # static conflicts: lines, symbols, the neat line, soft obstacles
+    line_hits = np.zeros(nc, dtype=np.int64)
+    pieces = [np.asarray(p, dtype=float) for p in lines if len(p) >= 2]
+    if pieces:
+        idx = np.repeat(np.arange(len(pieces)), [len(p) for p in pieces])
+        tree = shapely.STRtree(shapely.linestrings(np.vstack(pieces), indices=idx))
+        ci, _ = tree.query(geoms, predicate="intersects")
+        line_hits = np.bincount(ci, minlength=nc)
+    sym_hits = np.zeros(nc, dtype=np.int64)
+    symbols = np.asarray(symbols, dtype=float).reshape(-1, 4)
+    if len(symbols):
+        tree = shapely.STRtree(
+            shapely.box(symbols[:, 0], symbols[:, 1], symbols[:, 2], symbols[:, 3])
+        )
+        ci, si = tree.query(geoms, predicate="intersects")
+        own_sym = np.array([r.own for r in reqs])[own[ci]]
+        keep = si != own_sym
+        sym_hits = np.bincount(ci[keep], minlength=nc)
+    fx0, fy0, fx1, fy1 = frame
+    out_frame = (
+        (boxes[:, 0] < fx0) | (boxes[:, 1] < fy0) | (boxes[:, 2] > fx1) | (boxes[:, 3] > fy1)
+    ).astype(np.int64)
+    soft_hits = np.zeros(nc)
+    if soft is not None and len(soft):
+        soft = np.asarray(soft, dtype=float).reshape(-1, 4)
+        tree = shapely.STRtree(shapely.box(soft[:, 0], soft[:, 1], soft[:, 2], soft[:, 3]))
+        ci, _ = tree.query(geoms, predicate="intersects")
+        soft_hits = np.bincount(ci, minlength=nc).astype(float)
+    static = line_hits + sym_hits + out_frame + _SOFT_COST * soft_hits + base_cost
+    if progress is not None:
+        progress(3, 10)
+
+    # candidate-candidate conflicts between different labels (CSR adjacency)
+    tree = shapely.STRtree(geoms)
+    a, b = tree.query(geoms, predicate="intersects")
+    keep = own[a] != own[b]
+    a, b = a[keep], b[keep]
+    order = np.argsort(a, kind="stable")
+    a, b = a[order], b[order]
+    indptr = np.searchsorted(a, np.arange(nc + 1))
+    nbrs = b
+    if progress is not None:
+        progress(4, 10)
+
+    chosen = np.zeros(nc, dtype=bool)
+    cur = np.full(n, -1, dtype=np.int64)
+
+    def overlaps(c: int) -> int:
+        return int(chosen[nbrs[indptr[c] : indptr[c + 1]]].sum())
+
+    # greedy: labels with the fewest free candidates first
+    hard = line_hits + sym_hits + out_frame
+    free_count = np.add.reduceat((hard == 0).astype(np.int64), first[:-1])
+    for i in np.argsort(free_count, kind="stable"):
+        lo, hi = first[i], first[i + 1]
+        best, best_c = lo, math.inf
+        for c in range(lo, hi):
+            v = static[c] + overlaps(c)
+            if v < best_c - 1e-12:
+                best, best_c = c, v
+        cur[i] = best
+        chosen[best] = True
+    if progress is not None:
+        progress(5, 10)
+
+    # simulated annealing over the labels still in conflict
+    def label_cost(c: int) -> float:
+        return float(static[c]) + overlaps(c)
+
+    def conflicted() -> np.ndarray:
+        lab = np.array([overlaps(int(c)) > 0 for c in cur])
+        return np.flatnonzero((hard[cur] > 0) | lab)
+
+    bad = conflicted()
+    if len(bad):
+        rng = np.random.default_rng(_SA_SEED)
+        total = float(sum(label_cost(int(c)) for c in cur))
+        best_total, best_cur = total, cur.copy()
+        temp = 1.0
+        stages = 40
+        moves_per_stage = max(50, 20 * len(bad))
+        for stage in range(stages):
+            improved = False
+            for _ in range(moves_per_stage):
+                i = int(bad[rng.integers(len(bad))])
+                lo, hi = first[i], first[i + 1]
+                old = int(cur[i])
+                new = int(rng.integers(lo, hi))
+                if new == old:
+                    continue
+                chosen[old] = False
+                delta = (static[new] + 2 * overlaps(new)) - (static[old] + 2 * overlaps(old))
+                if delta <= 0 or rng.random() < math.exp(-delta / temp):
+                    cur[i] = new
+                    chosen[new] = True
+                    total += float(delta)
+                    if total < best_total - 1e-12:
+                        best_total, best_cur = total, cur.copy()
+                        improved = True
+                else:
+                    chosen[old] = True
+            temp *= 0.85
+            if progress is not None:
+                progress(5 + (4 * (stage + 1)) // stages, 10)
+            if not improved and stage > 10 and best_total == total and temp < 0.05:
+                break
+        cur = best_cur
+        chosen[:] = False
+        chosen[cur] = True
+    # a last greedy pass: each label moves to its cheapest candidate given the others
+    for _ in range(3):
+        changed = False
+        for i in range(n):
+            old = int(cur[i])
+            chosen[old] = False
+            lo, hi = first[i], first[i + 1]
+            best, best_c = old, static[old] + overlaps(old)
+            for c in range(lo, hi):
+                v = static[c] + overlaps(c)
+                if v < best_c - 1e-9:
+                    best, best_c = c, v
+            cur[i] = best
+            chosen[best] = True
+            changed |= best != old
+        if not changed:
+            break
+
+    lab_hits = np.array([overlaps(int(c)) for c in cur], dtype=np.int64)
+    if progress is not None:
+        progress(10, 10)
+    return Placement(
+        x=xy[cur, 0].copy(),
+        y=xy[cur, 1].copy(),
+        rank=(cur - first[:-1]).astype(np.int64),
+        lines=line_hits[cur].astype(np.int64),
+        symbols=sym_hits[cur].astype(np.int64),
+        labels=lab_hits,
+        frame=out_frame[cur].astype(np.int64),
+        cost=float(static[cur].sum() + lab_hits.sum() / 2.0),
+        stats={"candidates": nc, "conflict_pairs": len(a) // 2},
+    )
