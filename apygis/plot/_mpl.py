@@ -19,6 +19,7 @@ renders, so a long plot shows progress during the save itself.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -30,7 +31,7 @@ __all__ = ["RC", "drawing_figure"]
 
 #: matplotlib settings of every rendering: TrueType (Type 42) fonts embedded
 #: as subsets in PDF, no path simplification (the plot is drawn as it is).
-RC = {
+RC: Any = {
     "pdf.fonttype": 42,
     "path.simplify": False,
     "svg.fonttype": "none",

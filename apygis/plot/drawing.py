@@ -781,17 +781,17 @@ def build_drawing(
         keep = _inside(px, py, frame)
         stats["symbols_dropped"] += int((~keep).sum())
         for i in np.flatnonzero(keep):
-            p = points[int(i)]
+            cp = points[int(i)]
             x, y = float(px[i]), float(py[i])
             mark_item = len(items)
             items.extend(control_mark(x, y, fpen))
             r = CONTROL_MARK_MM * 1.6
             symbol_boxes.append((x - r, y - r, x + r, y + r))
             own = len(symbol_boxes) - 1
-            text = p.id if not math.isfinite(p.z) else f"{p.id}  {p.z:.{pdef.height_decimals}f}"
+            text = cp.id if not math.isfinite(cp.z) else f"{cp.id}  {cp.z:.{pdef.height_decimals}f}"
             w, dsc = text_size(text, th)
             requests.append(LabelRequest(text, x, y, th, w, dsc, "point", r + 0.4 * th, own))
-            label_meta.append((fpen, "control", f"control point {p.id}", mark_item))
+            label_meta.append((fpen, "control", f"control point {cp.id}", mark_item))
             stats["control_points"] += 1
     if data_progress is not None:
         data_progress(len(exts), len(exts))
@@ -842,11 +842,11 @@ def build_drawing(
             for j in col:
                 if j >= len(blocks):
                     continue
-                b = blocks[j]
-                if b.name == "title" and j == len(blocks) - 1:
-                    top = lay.panel[1] + b.height  # the title block sits at the bottom
-                items.extend(b.draw(cx, top, COLUMN_MM))
-                top -= b.height + BLOCK_GAP_MM
+                blk = blocks[j]
+                if blk.name == "title" and j == len(blocks) - 1:
+                    top = lay.panel[1] + blk.height  # the title block sits at the bottom
+                items.extend(blk.draw(cx, top, COLUMN_MM))
+                top -= blk.height + BLOCK_GAP_MM
     d.stats = stats
     if d.unplaced:
         log.info("labels that could not be placed free:\n  %s", "\n  ".join(d.unplaced))

@@ -167,21 +167,19 @@ def text_outlines(
     (2, True)
     """
     from matplotlib.font_manager import FontProperties
-    from matplotlib.path import Path
     from matplotlib.textpath import TextPath
 
     em = cap_height_mm / CAP_HEIGHT
     with quiet_missing_glyphs():
         path = TextPath((0.0, 0.0), text, size=em, prop=FontProperties(family=FONT_FAMILY))
-    if not len(path.vertices):
+    if not len(np.asarray(path.vertices)):
         return []
     a = np.radians(angle_deg)
     rot = np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])
     out = []
     for poly in path.to_polygons(closed_only=True):
-        if len(poly) < 3:
+        ring = np.asarray(poly, dtype=float)
+        if len(ring) < 3:
             continue
-        p = Path(poly)
-        pts = np.asarray(p.vertices, dtype=float) @ rot + (x, y)
-        out.append(pts)
+        out.append(ring @ rot + (x, y))
     return out

@@ -254,9 +254,9 @@ def place_labels(
         return Placement(np.zeros(0), np.zeros(0), e, e, e, e, e)
     cand_xy, cand_cost, owner = [], [], []
     for i, r in enumerate(reqs):
-        xy, c = candidates(r)
+        xy, costs = candidates(r)
         cand_xy.append(xy)
-        cand_cost.append(c)
+        cand_cost.append(costs)
         owner.append(np.full(len(xy), i))
     xy = np.vstack(cand_xy)
     base_cost = np.concatenate(cand_cost)
@@ -321,8 +321,8 @@ def place_labels(
     # greedy: labels with the fewest free candidates first
     hard = line_hits + sym_hits + out_frame
     free_count = np.add.reduceat((hard == 0).astype(np.int64), first[:-1])
-    for i in np.argsort(free_count, kind="stable"):
-        lo, hi = first[i], first[i + 1]
+    for i in np.argsort(free_count, kind="stable").tolist():
+        lo, hi = int(first[i]), int(first[i + 1])
         best, best_c = lo, math.inf
         for c in range(lo, hi):
             v = static[c] + overlaps(c)
@@ -383,8 +383,8 @@ def place_labels(
         for i in range(n):
             old = int(cur[i])
             chosen[old] = False
-            lo, hi = first[i], first[i + 1]
-            best, best_c = old, static[old] + overlaps(old)
+            lo, hi = int(first[i]), int(first[i + 1])
+            best, best_c = old, float(static[old]) + overlaps(old)
             for c in range(lo, hi):
                 v = static[c] + overlaps(c)
                 if v < best_c - 1e-9:

@@ -148,7 +148,7 @@ def round_scales(lo: float = 100, hi: float = 1e8) -> list[int]:
     >>> round_scales(1000, 10000)
     [1000, 2000, 2500, 5000, 10000]
     """
-    out = []
+    out: list[int] = []
     k = math.floor(math.log10(lo))
     while True:
         for m in (1, 2, 2.5, 5):
@@ -353,11 +353,15 @@ def plan_layout(
     wide = (window[2] - window[0]) >= (window[3] - window[1])
     W, H, label = next((p for p in biggest if (p[0] >= p[1]) == wide), biggest[0])
     avail_w, avail_h = W - ml - mr, H - mb - mt
-    side = "right" if panel is not None and panel.heights else None
-    cols = flow_columns(panel.heights, avail_h - 2 * band_mm, panel.last_at_bottom) if side else []
-    if side and cols is None:
-        side, cols = None, []
-    pw = _panel_width(cols, panel) + GAP_MM if side and panel is not None and cols else 0.0
+    side: str | None = None
+    cols: list[list[int]] = []
+    pw = 0.0
+    col_h = avail_h - 2 * band_mm
+    if panel is not None and panel.heights:
+        got = flow_columns(panel.heights, col_h, panel.last_at_bottom)
+        if got is not None:
+            side, cols = "right", got
+            pw = _panel_width(cols, panel) + GAP_MM
     max_w = (avail_w - pw - 2 * band_mm) / f
     max_h = (avail_h - 2 * band_mm) / f
     if max_w <= 0 or max_h <= 0:
@@ -378,7 +382,7 @@ def plan_layout(
         wh * f,
     )
     map_w, map_h = ww * f + 2 * band_mm, wh * f + 2 * band_mm
-    fit = (side, pw - GAP_MM if side else 0.0, map_h, cols)
+    fit = (side, pw - GAP_MM if side else 0.0, max(map_h, col_h) if side else map_h, cols)
     lay = _place(W, H, label, s, f, cut_window, map_w, map_h, band_mm, pdef, fit)
     return Layout(**{**lay.__dict__, "cut": True})
 

@@ -158,10 +158,10 @@ def grid_items(
             for y in py:
                 if min(x - x0, x1 - x, y - y0, y1 - y) < a + 0.5:
                     continue  # at the neat line the edge ticks mark it
-                h = np.array([(max(x - a, x0), y), (min(x + a, x1), y)])
-                v = np.array([(x, max(y - a, y0)), (x, min(y + a, y1))])
-                under.append(PaperLine(pen, h, False, "grid"))
-                under.append(PaperLine(pen, v, False, "grid"))
+                across = np.array([(max(x - a, x0), y), (min(x + a, x1), y)])
+                up = np.array([(x, max(y - a, y0)), (x, min(y + a, y1))])
+                under.append(PaperLine(pen, across, False, "grid"))
+                under.append(PaperLine(pen, up, False, "grid"))
                 soft.append((x - a, y - a, x + a, y + a))
         # inward ticks at the neat line, so that the grid can be read along the edge
         for x in px:
