@@ -80,6 +80,7 @@ from apygis.plot.primitives import (
 from apygis.progress import Progress, phase
 
 __all__ = [
+    "MIN_GRID_MM",
     "SPOT_HEIGHT_CODE",
     "ControlPoint",
     "Drawing",
@@ -97,6 +98,8 @@ log = logging.getLogger(__name__)
 
 #: The symbol code of the spot height.
 SPOT_HEIGHT_CODE = 0
+#: The closest grid lines may be on paper, mm.
+MIN_GRID_MM = 2.0
 
 _EPS = 1e-9  # mm: points this close outside the neat line count as on it
 _UNIT_NAMES = {
@@ -603,6 +606,12 @@ def build_drawing(
     lay = plan_layout(extent, pdef, m.scale, unit_m, spec, band)
     f = lay.mm_per_unit
     interval = None if style == "off" else (pdef.grid_interval or grid_interval(f))
+    if interval is not None and interval * f < MIN_GRID_MM:
+        raise FormatError(
+            f"the grid interval {interval:g} {unit} is {interval * f:.3g} mm on paper at "
+            f"1:{lay.scale}; it must be at least {MIN_GRID_MM:g} mm "
+            f"({MIN_GRID_MM / f:.3g} {unit}), or the grid off"
+        )
     north = _north(crs, lay.window)
     blocks = blocks_for(lay.scale, f, interval, north)
 

@@ -119,8 +119,8 @@ def _unit_advance(text: str) -> float:
         idx = font.get_char_index(ord(ch))
         if prev is not None:
             total += font.get_kerning(prev, idx, Kerning.UNFITTED) / 64.0
-        with quiet_missing_glyphs():
-            glyph = font.load_char(ord(ch), flags=LoadFlags.NO_HINTING)
+        with quiet_missing_glyphs():  # a missing character advances as the empty box
+            glyph = font.load_glyph(idx, flags=LoadFlags.NO_HINTING)
         total += glyph.linearHoriAdvance / 65536.0
         prev = idx
     return total / _EM_PX

@@ -31,10 +31,11 @@ them; Christensen, Marks & Shieber 1995 for the search):
    result is the same every run) improves the whole, and the best state
    seen is kept.
 
-Cost of a placement: 1 per conflict (line, symbol, neat line, other
-label), 0.3 per soft obstacle, plus the candidate's rank cost (0.002 per
-rank step; a text's moves cost 0.01 per mm): conflicts dominate, and among
-free positions the preferred one wins.
+Cost of a placement: 1 per line crossed, 2 per symbol covered, 3 for
+crossing the neat line and 3 per other label overlapped (an overlap of
+labels is the least readable), 0.3 per soft obstacle, plus the candidate's
+rank cost (0.002 per rank step; a text's moves cost 0.01 per mm): conflicts
+dominate, and among free positions the preferred one wins.
 
 A label whose chosen position still has a conflict **could not be placed
 free**; :class:`Placement` counts them and says with what they collide.
@@ -70,7 +71,11 @@ _POINT_ORDER = ((1, 0), (1, 1), (1, -1), (-1, 0), (-1, 1), (-1, -1), (0, 1), (0,
 _RANK_COST = 0.002
 _MOVE_COST = 0.01  # per mm a text moves from where it was put
 _SOFT_COST = 0.3
+# what a conflict costs: a label over another label or across the neat line is the worst
+# (unreadable, or in the margin), covering a symbol next, crossing a line the least
+_W_LINE, _W_SYMBOL, _W_FRAME, _W_LABEL = 1.0, 2.0, 3.0, 3.0
 _SA_SEED = 20240612
+_MAX_MOVES_PER_STAGE = 5000  # bounds the search on big sheets: 40 stages of at most this
 
 
 @dataclass(frozen=True)
@@ -270,12 +275,22 @@ def place_labels(
 
     # static conflicts: lines, symbols, the neat line, soft obstacles
     line_hits = np.zeros(nc, dtype=np.int64)
-    pieces = [np.asarray(p, dtype=float) for p in lines if len(p) >= 2]
+    pieces = [np.asarray(p, dtype=float).reshape(-1, 2) for p in lines if len(p) >= 2]
     if pieces:
-        idx = np.repeat(np.arange(len(pieces)), [len(p) for p in pieces])
-        tree = shapely.STRtree(shapely.linestrings(np.vstack(pieces), indices=idx))
-        ci, _ = tree.query(geoms, predicate="intersects")
-        line_hits = np.bincount(ci, minlength=nc)
+        # segments, not whole lines, in the tree: small boxes prune well; a candidate
+        # counts each line it crosses once
+        starts = np.vstack([p[:-1] for p in pieces])
+        ends = np.vstack([p[1:] for p in pieces])
+        line_of = np.repeat(np.arange(len(pieces)), [len(p) - 1 for p in pieces])
+        segs = shapely.linestrings(
+            np.stack([starts, ends], axis=1).reshape(-1, 2),
+            indices=np.repeat(np.arange(len(starts)), 2),
+        )
+        tree = shapely.STRtree(segs)
+        ci, si = tree.query(geoms, predicate="intersects")
+        if len(ci):
+            pairs = np.unique(ci.astype(np.int64) * len(pieces) + line_of[si])
+            line_hits = np.bincount(pairs // len(pieces), minlength=nc)
     sym_hits = np.zeros(nc, dtype=np.int64)
     symbols = np.asarray(symbols, dtype=float).reshape(-1, 4)
     if len(symbols):
@@ -296,7 +311,13 @@ def place_labels(
         tree = shapely.STRtree(shapely.box(soft[:, 0], soft[:, 1], soft[:, 2], soft[:, 3]))
         ci, _ = tree.query(geoms, predicate="intersects")
         soft_hits = np.bincount(ci, minlength=nc).astype(float)
-    static = line_hits + sym_hits + out_frame + _SOFT_COST * soft_hits + base_cost
+    static = (
+        _W_LINE * line_hits
+        + _W_SYMBOL * sym_hits
+        + _W_FRAME * out_frame
+        + _SOFT_COST * soft_hits
+        + base_cost
+    )
     if progress is not None:
         progress(3, 10)
 
@@ -312,90 +333,82 @@ def place_labels(
     if progress is not None:
         progress(4, 10)
 
-    chosen = np.zeros(nc, dtype=bool)
     cur = np.full(n, -1, dtype=np.int64)
+    occ = np.zeros(nc, dtype=np.int64)  # how many chosen candidates overlap each candidate
 
-    def overlaps(c: int) -> int:
-        return int(chosen[nbrs[indptr[c] : indptr[c + 1]]].sum())
+    def choose(c: int) -> None:
+        occ[nbrs[indptr[c] : indptr[c + 1]]] += 1
 
-    # greedy: labels with the fewest free candidates first
+    def unchoose(c: int) -> None:
+        occ[nbrs[indptr[c] : indptr[c + 1]]] -= 1
+
+    # greedy: labels with the fewest free candidates first, each at its cheapest candidate
     hard = line_hits + sym_hits + out_frame
     free_count = np.add.reduceat((hard == 0).astype(np.int64), first[:-1])
     for i in np.argsort(free_count, kind="stable").tolist():
         lo, hi = int(first[i]), int(first[i + 1])
-        best, best_c = lo, math.inf
-        for c in range(lo, hi):
-            v = static[c] + overlaps(c)
-            if v < best_c - 1e-12:
-                best, best_c = c, v
+        best = lo + int(np.argmin(static[lo:hi] + _W_LABEL * occ[lo:hi]))
         cur[i] = best
-        chosen[best] = True
+        choose(best)
     if progress is not None:
         progress(5, 10)
 
-    # simulated annealing over the labels still in conflict
-    def label_cost(c: int) -> float:
-        return float(static[c]) + overlaps(c)
-
-    def conflicted() -> np.ndarray:
-        lab = np.array([overlaps(int(c)) > 0 for c in cur])
-        return np.flatnonzero((hard[cur] > 0) | lab)
-
-    bad = conflicted()
+    # simulated annealing over the labels in conflict (Metropolis moves, geometric cooling)
+    bad = np.flatnonzero((hard[cur] > 0) | (occ[cur] > 0))
     if len(bad):
         rng = np.random.default_rng(_SA_SEED)
-        total = float(sum(label_cost(int(c)) for c in cur))
+        total = float((static[cur] + _W_LABEL * occ[cur]).sum())
         best_total, best_cur = total, cur.copy()
         temp = 1.0
         stages = 40
-        moves_per_stage = max(50, 20 * len(bad))
+        moves_per_stage = min(max(50, 20 * len(bad)), _MAX_MOVES_PER_STAGE)
+        picks = rng.integers(len(bad), size=(stages, moves_per_stage))
+        draws = rng.random((stages, moves_per_stage))
+        idle = 0
         for stage in range(stages):
-            improved = False
-            for _ in range(moves_per_stage):
-                i = int(bad[rng.integers(len(bad))])
-                lo, hi = first[i], first[i + 1]
+            for k in range(moves_per_stage):
+                i = int(bad[picks[stage, k]])
+                lo, hi = int(first[i]), int(first[i + 1])
                 old = int(cur[i])
-                new = int(rng.integers(lo, hi))
+                new = lo + int(draws[stage, k] * (hi - lo))
                 if new == old:
                     continue
-                chosen[old] = False
-                delta = (static[new] + 2 * overlaps(new)) - (static[old] + 2 * overlaps(old))
+                delta = float(static[new] - static[old] + 2 * _W_LABEL * (occ[new] - occ[old]))
                 if delta <= 0 or rng.random() < math.exp(-delta / temp):
+                    unchoose(old)
+                    choose(new)
                     cur[i] = new
-                    chosen[new] = True
-                    total += float(delta)
-                    if total < best_total - 1e-12:
-                        best_total, best_cur = total, cur.copy()
-                        improved = True
-                else:
-                    chosen[old] = True
+                    total += delta
             temp *= 0.85
+            if total < best_total - 1e-9:
+                best_total, best_cur, idle = total, cur.copy(), 0
+            else:
+                idle += 1
             if progress is not None:
                 progress(5 + (4 * (stage + 1)) // stages, 10)
-            if not improved and stage > 10 and best_total == total and temp < 0.05:
+            if idle >= 8:
                 break
         cur = best_cur
-        chosen[:] = False
-        chosen[cur] = True
+        occ[:] = 0
+        for c in cur.tolist():
+            choose(c)
     # a last greedy pass: each label moves to its cheapest candidate given the others
     for _ in range(3):
         changed = False
         for i in range(n):
             old = int(cur[i])
-            chosen[old] = False
+            unchoose(old)
             lo, hi = int(first[i]), int(first[i + 1])
-            best, best_c = old, float(static[old]) + overlaps(old)
-            for c in range(lo, hi):
-                v = static[c] + overlaps(c)
-                if v < best_c - 1e-9:
-                    best, best_c = c, v
+            seg = static[lo:hi] + _W_LABEL * occ[lo:hi]
+            k = int(np.argmin(seg))
+            best = lo + k if seg[k] < static[old] + _W_LABEL * occ[old] - 1e-9 else old
             cur[i] = best
-            chosen[best] = True
+            choose(best)
             changed |= best != old
         if not changed:
             break
 
-    lab_hits = np.array([overlaps(int(c)) for c in cur], dtype=np.int64)
+    lab_hits = occ[cur].astype(np.int64)
     if progress is not None:
         progress(10, 10)
     return Placement(
@@ -406,6 +419,6 @@ def place_labels(
         symbols=sym_hits[cur].astype(np.int64),
         labels=lab_hits,
         frame=out_frame[cur].astype(np.int64),
-        cost=float(static[cur].sum() + lab_hits.sum() / 2.0),
+        cost=float(static[cur].sum() + _W_LABEL * lab_hits.sum() / 2.0),
         stats={"candidates": nc, "conflict_pairs": len(a) // 2},
     )

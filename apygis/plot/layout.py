@@ -327,12 +327,14 @@ def plan_layout(
     scales = [int(fixed)] if fixed else round_scales()
     papers = _papers(pdef, target_a3=not fixed)
     ml, mb, mr, mt = pdef.margins_mm
-    for W, H, _ in papers:
-        if W - ml - mr <= 2 * band_mm or H - mb - mt <= 2 * band_mm:
-            raise FormatError(
-                f"the margins ({ml:g}, {mb:g}, {mr:g}, {mt:g} mm) leave no room "
-                f"on {W:g} x {H:g} mm paper"
-            )
+    roomy = [p for p in papers if p[0] - ml - mr > 2 * band_mm and p[1] - mb - mt > 2 * band_mm]
+    if not roomy:
+        W, H, _ = papers[-1]
+        raise FormatError(
+            f"the margins ({ml:g}, {mb:g}, {mr:g}, {mt:g} mm) leave no room "
+            f"on {W:g} x {H:g} mm paper"
+        )
+    papers = roomy
     if pdef.origin is not None:
         return _plan_with_origin(extent, pdef, int(scales[0]), unit_m, panel, band_mm, papers)
     for s in scales:
