@@ -12,7 +12,8 @@ millimetres, so a primitive's coordinates are used as they are:
   baseline alignment does, pixel for pixel, without its layout machinery,
   several times faster): DejaVu Sans, the baseline start at the text's
   point, font size = cap height / :data:`~apygis.plot.fonts.CAP_HEIGHT`,
-  turned by its angle; never parsed as mathtext (a ``$`` is a dollar).
+  turned by its angle; never parsed as mathtext (a ``$`` is a dollar); a
+  text with a halo over a white stroke of its glyphs' outlines.
 
 Items keep their drawing order (z-order = position). Small marker artists
 between chunks of items report ``progress(done, total)`` while matplotlib
@@ -27,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from apygis.plot.fonts import CAP_HEIGHT, FONT_FAMILY, PT_PER_MM
-from apygis.plot.primitives import FilledPolygon, FilledRects, PaperLine, PaperText
+from apygis.plot.fonts import CAP_HEIGHT, FONT_FAMILY, PT_PER_MM, text_outlines
+from apygis.plot.primitives import HALO, FilledPolygon, FilledRects, PaperLine, PaperText
 from apygis.progress import Progress
 
 __all__ = ["RC", "drawing_figure"]
@@ -127,6 +128,7 @@ def _runs(items: list) -> list[tuple[str, int, list]]:
 def _texts_class():
     from matplotlib.artist import Artist
     from matplotlib.font_manager import FontProperties
+    from matplotlib.path import Path
 
     class Texts(Artist):
         """Texts drawn straight by the renderer, in order (see the module's notes)."""
@@ -143,6 +145,25 @@ def _texts_class():
                 self._props[height] = prop
             return prop
 
+        def _halo(self, renderer, t: PaperText) -> None:
+            """A white outline of the glyphs under the text (the text stays text)."""
+            rings = text_outlines(t.text, t.x, t.y, t.height, t.angle)
+            if not rings or self.axes is None:
+                return
+            verts = np.vstack([np.vstack([r, r[:1]]) for r in rings])
+            codes = np.concatenate(
+                [[Path.MOVETO, *([Path.LINETO] * (len(r) - 1)), Path.CLOSEPOLY] for r in rings]
+            ).astype(np.uint8)
+            hgc = renderer.new_gc()
+            try:
+                hgc.set_foreground((1.0, 1.0, 1.0, 1.0), isRGBA=True)
+                hgc.set_linewidth(HALO * t.height * PT_PER_MM)
+                hgc.set_joinstyle("round")
+                hgc.set_capstyle("round")
+                renderer.draw_path(hgc, Path(verts, codes), self.axes.transData, None)
+            finally:
+                hgc.restore()
+
         def draw(self, renderer) -> None:
             if not self.get_visible() or self.axes is None:
                 return
@@ -154,6 +175,8 @@ def _texts_class():
                 for t, colour in self._texts:
                     if not t.text:
                         continue
+                    if t.halo:
+                        self._halo(renderer, t)
                     gc.set_foreground((*colour, 1.0), isRGBA=True)
                     x, y = to_display((t.x, t.y))
                     if flip:

@@ -376,17 +376,9 @@ def _north(crs, window) -> str:
     return f"grid north; true north {abs(theta):.2f} deg {side} of it"
 
 
-def _extent(layers, control_only: bool, points: Sequence[ControlPoint]):
+def _extent(layers, points: Sequence[ControlPoint]):
     xs0, ys0, xs1, ys1 = [], [], [], []
     for lay in layers:
-        if control_only:
-            sym = lay.symbols
-            if len(sym):
-                xs0.append(float(sym["x"].min()))
-                ys0.append(float(sym["y"].min()))
-                xs1.append(float(sym["x"].max()))
-                ys1.append(float(sym["y"].max()))
-            continue
         e = lay.extent()
         if e is not None:
             xs0.append(e[0])
@@ -556,7 +548,8 @@ def build_drawing(
             for p, x, y in zip(points, xs, ys, strict=True)
         ]
     unit_m, unit = _unit(crs)
-    extent = _extent([pm.layers[e] for e in exts], control, points)
+    # a control plot covers the whole map, so that its grid orients the sheet
+    extent = _extent(list(pm.layers.values()) if control else [pm.layers[e] for e in exts], points)
     scale_for_layout = pdef.scale or m.scale
 
     # the margin panel's blocks (their heights decide the layout)
@@ -817,8 +810,13 @@ def build_drawing(
     for k, req in enumerate(requests):
         pen, role, what, own_item = label_meta[k]
         d.labels.append((len(items), own_item, req.x, req.y))
-        items.append(make_text(pen, placement.x[k], placement.y[k], req.height, req.text, role))
-        if not placement.free[k]:
+        free = bool(placement.free[k])
+        items.append(
+            make_text(
+                pen, placement.x[k], placement.y[k], req.height, req.text, role, halo=not free
+            )
+        )
+        if not free:
             hits = []
             for name, arr in (
                 ("line", placement.lines),

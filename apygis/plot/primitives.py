@@ -27,6 +27,7 @@ import numpy as np
 from apygis.plot.fonts import text_size
 
 __all__ = [
+    "HALO",
     "FilledPolygon",
     "FilledRects",
     "PaperLine",
@@ -68,7 +69,9 @@ class PaperText(NamedTuple):
     """A text: baseline start ``(x, y)`` mm, cap height ``height`` mm, ``angle`` degrees.
 
     ``width`` is the ink width in mm (0 when unknown; :func:`make_text`
-    measures it).
+    measures it). ``halo``: drawn over a white outline (:data:`HALO`), for a
+    label that could not be placed free, so that it stays legible over what
+    it crosses (the SVG, PDF and pin plot; a pen plotter cannot erase).
     """
 
     pen: int
@@ -79,10 +82,22 @@ class PaperText(NamedTuple):
     role: str = "text"
     angle: float = 0.0
     width: float = 0.0
+    halo: bool = False
+
+
+#: Width of a label's white halo as a fraction of its cap height (each side half of it).
+HALO = 0.35
 
 
 def make_text(
-    pen: int, x: float, y: float, height: float, text: str, role: str = "text", angle: float = 0.0
+    pen: int,
+    x: float,
+    y: float,
+    height: float,
+    text: str,
+    role: str = "text",
+    angle: float = 0.0,
+    halo: bool = False,
 ) -> PaperText:
     """A :class:`PaperText` with its width measured.
 
@@ -91,7 +106,15 @@ def make_text(
     10.94
     """
     return PaperText(
-        pen, float(x), float(y), float(height), text, role, float(angle), text_size(text, height)[0]
+        pen,
+        float(x),
+        float(y),
+        float(height),
+        text,
+        role,
+        float(angle),
+        text_size(text, height)[0],
+        halo,
     )
 
 

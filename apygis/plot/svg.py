@@ -20,6 +20,8 @@ its pen as ``class="pen-N"`` and its role as ``data-role``:
   with ``rotate(-angle)``, and ``textLength`` set to its advance width in
   DejaVu Sans, so a viewer that substitutes another font keeps the label
   where it was placed. Text is UTF-8: any script the viewer's fonts cover.
+  A label that could not be placed free has a white halo (a white stroke
+  painted under its fill: ``paint-order="stroke"``).
 
 Examples
 --------
@@ -45,7 +47,7 @@ from xml.sax.saxutils import escape, quoteattr
 import numpy as np
 
 from apygis.plot.fonts import CAP_HEIGHT, FONT_FAMILY, text_advance
-from apygis.plot.primitives import FilledPolygon, FilledRects, PaperLine, PaperText
+from apygis.plot.primitives import HALO, FilledPolygon, FilledRects, PaperLine, PaperText
 
 __all__ = ["SVG_NS", "drawing_svg"]
 
@@ -102,10 +104,16 @@ def drawing_svg(d) -> bytes:
                 if advance > 0
                 else ""
             )
+            stroke = (
+                f'stroke="#ffffff" stroke-width="{_n(HALO * it.height)}" '
+                'stroke-linejoin="round" paint-order="stroke"'
+                if it.halo
+                else 'stroke="none"'
+            )
             out.append(
                 f'<text {cls} xml:space="preserve" x="{x}" y="{y}"{turn} '
                 f'font-family="{_FAMILY}" font-size="{_n(it.height / CAP_HEIGHT)}" '
-                f'fill="{colour}" stroke="none"{length}>{escape(it.text)}</text>\n'
+                f'fill="{colour}" {stroke}{length}>{escape(it.text)}</text>\n'
             )
     out.append("</svg>\n")
     return "".join(out).encode("utf-8")

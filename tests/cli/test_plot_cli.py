@@ -246,3 +246,75 @@ def test_printout_pdf_has_the_pages_the_text_needs(run, sample_dir, tmp_path):
     txt = tmp_path / "listing.txt"
     run("printout", sample_dir / "ZH1091", "-o", txt)
     assert txt.read_text(encoding="utf-8") == text
+
+
+class _Bar:
+    """A stand-in for the terminal's progress bar that keeps what it was told."""
+
+    made: list[_Bar] = []  # noqa: RUF012
+
+    def __init__(self, length, label):
+        self.length, self.label, self.pos, self.updates = length, label, 0, []
+        _Bar.made.append(self)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def update(self, n):
+        self.pos += n
+        self.updates.append(self.pos)
+
+
+@pytest.mark.parametrize("ext", ["pdf", "png", "svg"])
+def test_plot_shows_progress_on_a_terminal(run, sample_dir, tmp_path, monkeypatch, ext):
+    import apygis.cli.plot as plot_cli
+
+    _Bar.made.clear()
+    monkeypatch.setattr(plot_cli, "progress_bar", _Bar)
+    run("plot", sample_dir / "ZH1091", "-o", tmp_path / f"p.{ext}", "--dpi", "40")
+    (bar,) = _Bar.made
+    assert bar.label == "plotting ZH1091"
+    assert bar.updates == sorted(bar.updates)
+    assert bar.pos == bar.length  # the bar ends full
+    assert len(set(bar.updates)) > 5  # and moved on the way: layout and rendering
+
+
+def test_printout_pdf_shows_progress(run, sample_dir, tmp_path, monkeypatch):
+    import apygis.cli.printout as printout_cli
+
+    _Bar.made.clear()
+    monkeypatch.setattr(printout_cli, "progress_bar", _Bar)
+    run("printout", sample_dir / "ZH1091", "-o", tmp_path / "p.pdf")
+    (bar,) = _Bar.made
+    assert bar.pos == bar.length
+    assert len(bar.updates) > 3
+
+
+def test_control_plot_of_a_map_without_a_control_layer_is_a_grid_plot(run, sample_dir, tmp_path):
+    out = tmp_path / "grid.svg"
+    res = run(
+        "plot",
+        sample_dir / "ZH1091",
+        "-o",
+        out,
+        "--control",
+        "--layers",
+        "e",
+        "--bbox",
+        "2683000,1247000,2685400,1248600",
+    )
+    assert "layers e: 0 lines, 96 symbols" in res.output
+    import apygis
+
+    m = apygis.MapFile("BARE", scale=5000, crs="EPSG:2056")
+    m.layer("r").add_line([(2683000, 1247000, 0), (2684000, 1248000, 0)], code=1)
+    apygis.write(m, tmp_path / "bare.gpkg")
+    res = run("plot", tmp_path / "bare.gpkg", "-o", out, "--control", "--overwrite")
+    assert "layers none: 0 lines, 0 symbols" in res.output
+    root = ET.fromstring(out.read_bytes())
+    ns = {"s": "http://www.w3.org/2000/svg"}
+    assert len(root.findall("s:polyline[@data-role='grid']", ns)) >= 8  # the grid, as lines
+    assert root.findall("s:text[@data-role='grid-label']", ns)

@@ -87,6 +87,17 @@ def test_labels_that_cannot_be_free_are_counted():
     assert d.stats["labels_overlapping"] == len(crossed) == len(d.unplaced) > 0
     assert f"{len(crossed)} could not be placed free" in d.summary()
     assert all(u.startswith("spot height e ") and "crosses" in u for u in d.unplaced)
+    # those, and only those, get a white halo (SVG: a white stroke painted first)
+    halos = [t for t in d.items if isinstance(t, PaperText) and t.halo]
+    assert len(halos) == len(crossed)
+    from apygis.plot.svg import drawing_svg
+
+    svg = drawing_svg(d).decode()
+    assert svg.count('paint-order="stroke"') == len(crossed)
+    free = build_drawing(
+        m, parse_plotdef(FREE.replace("window 0 0 200 200", "window 0 0 400 400")), LIB
+    )
+    assert not any(t.halo for t in free.items if isinstance(t, PaperText)) or free.unplaced
 
 
 def test_labels_stay_inside_the_neat_line():
