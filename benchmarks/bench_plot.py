@@ -12,12 +12,11 @@ Figures (seconds, best of ``--repeat``):
   label, grid, legend, title block); ``labels_per_s`` and
   ``labels_overlapping`` (labels that could not be placed free);
 * ``hpgl_s``, ``svg_s``, ``pdf_s``: the outputs; ``png_150dpi_s``: the pin plot;
-* ``pdf_fpdf2_s`` and ``pdf_ratio`` (apygis / fpdf2): the same drawing written
-  by fpdf2 (``pip install -e ".[bench]"``), a peer that embeds the same
-  TrueType font; null when fpdf2 is not installed. This comparison chose
-  matplotlib's PDF backend: about as fast as the dedicated libraries on
-  plots (see the README of docs/plotter-def.md's outputs) while already a
-  dependency and rendering the pin plot from the same figure.
+* ``pdf_reportlab_s`` and ``pdf_ratio`` (apygis / reportlab): the same drawing
+  written by reportlab (``pip install -e ".[bench]"``), a dedicated PDF
+  library that embeds the same TrueType font as a subset; null when it is
+  not installed. apygis writes its PDF with matplotlib's backend, which is
+  already a dependency and renders the pin plot from the very same figure.
 
 Run: ``python benchmarks/bench_plot.py [--lines N] [--spots N] [--texts N]``
 Last line: one JSON object with the figures.
@@ -63,38 +62,56 @@ def make_map(lines: int, spots: int, texts: int, seed: int = 1) -> apygis.MapFil
     return m
 
 
-def fpdf2_pdf(d) -> bytes:
-    """The same drawing written by fpdf2 (the peer), item for item."""
-    from fpdf import FPDF
+def reportlab_pdf(d) -> bytes:
+    """The same drawing written by reportlab (the peer), item for item, DejaVu Sans embedded."""
+    import io
 
-    H = d.height_mm
-    pdf = FPDF(unit="mm", format=(d.width_mm, H))
-    pdf.set_compression(True)
-    pdf.add_page()
-    pdf.add_font("dejavu", "", font_path())
+    from reportlab.pdfbase import pdfmetrics
+    from reportlab.pdfbase.ttfonts import TTFont
+    from reportlab.pdfgen import canvas
+
+    pdfmetrics.registerFont(TTFont("DejaVuSans", font_path()))
+    pt = 72 / 25.4
+    buf = io.BytesIO()
+    c = canvas.Canvas(buf, pagesize=(d.width_mm * pt, d.height_mm * pt), invariant=1)
+    c.scale(pt, pt)
+    c.setLineCap(1)
+    c.setLineJoin(1)
     for it in d.items:
         pen = d.pens.get(it.pen)
-        colour = pen.colour if pen else (0, 0, 0)
+        rgb = [v / 255 for v in (pen.colour if pen else (0, 0, 0))]
         if isinstance(it, PaperLine):
-            pdf.set_draw_color(*colour)
-            pdf.set_line_width(pen.width_mm if pen else 0.35)
-            pts = [(float(x), H - float(y)) for x, y in it.points]
+            c.setStrokeColorRGB(*rgb)
+            c.setLineWidth(pen.width_mm if pen else 0.35)
+            p = c.beginPath()
+            p.moveTo(*it.points[0])
+            for x, y in it.points[1:]:
+                p.lineTo(x, y)
             if it.closed:
-                pts.append(pts[0])
-            pdf.polyline(pts)
+                p.close()
+            c.drawPath(p, stroke=1, fill=0)
         elif isinstance(it, FilledRects):
-            pdf.set_fill_color(*colour)
+            c.setFillColorRGB(*rgb)
             for x0, y0, x1, y1 in it.rects.tolist():
-                pdf.rect(x0, H - y1, x1 - x0, y1 - y0, style="F")
+                c.rect(x0, y0, x1 - x0, y1 - y0, stroke=0, fill=1)
         elif isinstance(it, FilledPolygon):
-            pdf.set_fill_color(*colour)
-            pdf.polygon([(float(x), H - float(y)) for x, y in it.points], style="F")
+            c.setFillColorRGB(*rgb)
+            p = c.beginPath()
+            p.moveTo(*it.points[0])
+            for x, y in it.points[1:]:
+                p.lineTo(x, y)
+            p.close()
+            c.drawPath(p, stroke=0, fill=1)
         elif isinstance(it, PaperText):
-            pdf.set_text_color(*colour)
-            pdf.set_font("dejavu", size=it.height / CAP_HEIGHT * 72 / 25.4)
-            with pdf.rotation(it.angle, it.x, H - it.y):
-                pdf.text(it.x, H - it.y, it.text)
-    return bytes(pdf.output())
+            c.setFillColorRGB(*rgb)
+            c.saveState()
+            c.translate(it.x, it.y)
+            c.rotate(it.angle)
+            c.setFont("DejaVuSans", it.height / CAP_HEIGHT)
+            c.drawString(0, 0, it.text)
+            c.restoreState()
+    c.save()
+    return buf.getvalue()
 
 
 def best(f, repeat: int):
@@ -130,15 +147,15 @@ def main() -> None:
         f"PNG at 150 dpi {png_s:.2f} s"
     )
     try:
-        import fpdf  # noqa: F401
+        import reportlab  # noqa: F401
     except ImportError:
         peer_s = None
-        print("fpdf2 is not installed (pip install -e '.[bench]'): no peer for the PDF")
+        print("reportlab is not installed (pip install -e '.[bench]'): no peer for the PDF")
     else:
-        peer_s, peer = best(lambda: fpdf2_pdf(d), args.repeat)
+        peer_s, peer = best(lambda: reportlab_pdf(d), args.repeat)
         print(
-            f"PDF by fpdf2 (the peer): {peer_s:.2f} s ({len(peer) / 1e6:.1f} MB); "
-            f"apygis/fpdf2 = {pdf_s / peer_s:.2f}"
+            f"PDF by reportlab (the peer): {peer_s:.2f} s ({len(peer) / 1e6:.1f} MB); "
+            f"apygis/reportlab = {pdf_s / peer_s:.2f}"
         )
     print(
         json.dumps(
@@ -154,7 +171,7 @@ def main() -> None:
                 "pdf_s": round(pdf_s, 3),
                 "pdf_mb": round(len(pdf) / 1e6, 2),
                 "png_150dpi_s": round(png_s, 3),
-                "pdf_fpdf2_s": None if peer_s is None else round(peer_s, 3),
+                "pdf_reportlab_s": None if peer_s is None else round(peer_s, 3),
                 "pdf_ratio": None if peer_s is None else round(pdf_s / peer_s, 2),
             }
         )

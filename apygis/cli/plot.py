@@ -291,6 +291,8 @@ def plot(
     if fmt in ("png", "tiff"):
         what += f", {dpi:g} dpi"
     line = f"wrote {output} ({what}): {d.summary()}"
+    if d.unplaced:
+        line += " (-v lists them)"
     if report.get("outlined"):
         k = report["outlined"]
         line += (
