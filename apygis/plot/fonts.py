@@ -107,9 +107,21 @@ def text_size(text: str, cap_height_mm: float) -> tuple[float, float]:
     return w * em, d * em
 
 
+@functools.lru_cache(maxsize=4096)
+def _glyph_advance(idx: int) -> float:
+    """The advance of glyph ``idx`` at an em of 1."""
+    from matplotlib.ft2font import LoadFlags
+
+    font = _font()
+    font.set_size(_EM_PX, 72)
+    with quiet_missing_glyphs():
+        glyph = font.load_glyph(idx, flags=LoadFlags.NO_HINTING)
+    return glyph.linearHoriAdvance / 65536.0 / _EM_PX
+
+
 @functools.lru_cache(maxsize=65536)
 def _unit_advance(text: str) -> float:
-    from matplotlib.ft2font import Kerning, LoadFlags
+    from matplotlib.ft2font import Kerning
 
     font = _font()
     font.set_size(_EM_PX, 72)
@@ -119,9 +131,7 @@ def _unit_advance(text: str) -> float:
         idx = font.get_char_index(ord(ch))
         if prev is not None:
             total += font.get_kerning(prev, idx, Kerning.UNFITTED) / 64.0
-        with quiet_missing_glyphs():  # a missing character advances as the empty box
-            glyph = font.load_glyph(idx, flags=LoadFlags.NO_HINTING)
-        total += glyph.linearHoriAdvance / 65536.0
+        total += _glyph_advance(idx) * _EM_PX  # a missing character advances as the box
         prev = idx
     return total / _EM_PX
 
@@ -152,34 +162,69 @@ def missing_glyphs(text: str) -> str:
     return "".join(out)
 
 
+_OUTLINE_EM = 30.0  # glyphs are outlined at this em (units) and scaled: fine flattening
+
+
+@functools.lru_cache(maxsize=2048)
+def _glyph_rings(ch: str) -> tuple[np.ndarray, ...]:
+    """The closed outlines of one character at an em of 1, its origin at (0, 0)."""
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import TextPath
+
+    if ch.isspace():
+        return ()
+    with quiet_missing_glyphs():
+        path = TextPath((0.0, 0.0), ch, size=_OUTLINE_EM, prop=FontProperties(family=FONT_FAMILY))
+    if not len(np.asarray(path.vertices)):
+        return ()
+    rings = []
+    for poly in path.to_polygons(closed_only=True):
+        ring = np.asarray(poly, dtype=float)
+        if len(ring) >= 3:
+            rings.append(ring / _OUTLINE_EM)
+    return tuple(rings)
+
+
+@functools.lru_cache(maxsize=65536)
+def _pen_positions(text: str) -> tuple[float, ...]:
+    """Where each character of ``text`` starts, at an em of 1 (advances and kerning)."""
+    from matplotlib.ft2font import Kerning
+
+    font = _font()
+    font.set_size(_EM_PX, 72)
+    out = []
+    x = 0.0
+    prev = None
+    for ch in text:
+        idx = font.get_char_index(ord(ch))
+        if prev is not None:
+            x += font.get_kerning(prev, idx, Kerning.UNFITTED) / 64.0 / _EM_PX
+        out.append(x)
+        x += _glyph_advance(idx)
+        prev = idx
+    return tuple(out)
+
+
 def text_outlines(
     text: str, x: float, y: float, cap_height_mm: float, angle_deg: float = 0.0
 ) -> list[np.ndarray]:
     """The glyph outlines of ``text`` as closed polylines (n, 2) in mm.
 
     The baseline starts at ``(x, y)`` and runs at ``angle_deg``
-    counter-clockwise from the x axis; curves are flattened to well under
-    0.01 mm at the usual label sizes. Used where a pen plotter's character
-    set cannot hold a text.
+    counter-clockwise from the x axis; each character is its DejaVu Sans
+    outline (curves flattened to under 0.01 mm at the usual label sizes)
+    at its advance and kerning. Used where a pen plotter's character set
+    cannot hold a text, and for the white halo of a label.
 
     >>> rings = text_outlines("O", 0.0, 0.0, 2.5)
     >>> len(rings), bool(np.allclose(rings[0][0], rings[0][-1]))
     (2, True)
     """
-    from matplotlib.font_manager import FontProperties
-    from matplotlib.textpath import TextPath
-
     em = cap_height_mm / CAP_HEIGHT
-    with quiet_missing_glyphs():
-        path = TextPath((0.0, 0.0), text, size=em, prop=FontProperties(family=FONT_FAMILY))
-    if not len(np.asarray(path.vertices)):
-        return []
     a = np.radians(angle_deg)
-    rot = np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])
+    rot = np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]]) * em
     out = []
-    for poly in path.to_polygons(closed_only=True):
-        ring = np.asarray(poly, dtype=float)
-        if len(ring) < 3:
-            continue
-        out.append(ring @ rot + (x, y))
+    for ch, x0 in zip(text, _pen_positions(text), strict=True):
+        for ring in _glyph_rings(ch):
+            out.append(np.add(ring, (x0, 0.0)) @ rot + (x, y))
     return out
