@@ -61,6 +61,7 @@ import numpy as np
 from apygis.progress import Progress
 
 __all__ = [
+    "PAIR_BUDGET",
     "LabelRequest",
     "Placement",
     "candidates",
@@ -75,7 +76,10 @@ _SOFT_COST = 0.3
 # (unreadable, or in the margin), covering a symbol next, crossing a line the least
 _W_LINE, _W_SYMBOL, _W_FRAME, _W_LABEL = 1.0, 2.0, 3.0, 3.0
 _SA_SEED = 20240612
-_MAX_MOVES_PER_STAGE = 5000  # bounds the search on big sheets: 40 stages of at most this
+_MAX_MOVES_PER_STAGE = 5000
+#: The most pairs of overlapping candidates weighed (both ways); beyond it, fewer
+#: candidates per label (``candidates(level=1, 2)``): memory stays some 200 MB.
+PAIR_BUDGET = 12_000_000  # bounds the search on big sheets: 40 stages of at most this
 
 
 @dataclass(frozen=True)
@@ -156,8 +160,13 @@ class Placement:
         return int((self.rank > 0).sum())
 
 
-def candidates(req: LabelRequest) -> tuple[np.ndarray, np.ndarray]:
+def candidates(req: LabelRequest, level: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """The candidate baselines ``(k, 2)`` (start x, y in mm) and their costs ``(k,)``, best first.
+
+    ``level`` 0 gives the full set; 1 and 2 fewer (a point label's first ring,
+    or its 4 sides; a text's vertical moves and first ring, or 4 positions),
+    for sheets too crowded to weigh every pair of the full sets
+    (:data:`PAIR_BUDGET`).
 
     >>> xy, cost = candidates(LabelRequest("12", 0.0, 0.0, 2.0, 2.0, 0.0, "point", 1.0))
     >>> xy[0].tolist(), len(xy)
@@ -186,13 +195,23 @@ def candidates(req: LabelRequest) -> tuple[np.ndarray, np.ndarray]:
             cost.append(base_cost + _RANK_COST * len(cost))
 
     if req.kind == "point":
-        for ring in range(3):
+        for ring in range(3 if level == 0 else 1):
             around(req.gap + 1.2 * h * ring, 0.05 * ring, req.x, req.y)
+        if level == 2:  # right, left, above, below
+            keep = [0, 3, 6, 7]
+            out[:] = [out[k] for k in keep]
+            cost[:] = [cost[k] for k in keep]
     else:
         seen = set()
         moves = []
-        for dy in (0.0, 0.8, -0.8, 1.6, -1.6, 2.4, -2.4):
-            for dx in (0.0, -1 / 3, 1 / 3):
+        dys = (
+            (0.0, 0.8, -0.8, 1.6, -1.6, 2.4, -2.4),
+            (0.0, 0.8, -0.8, 1.6, -1.6),
+            (0.0, 0.8, -0.8),
+        )
+        dxs = ((0.0, -1 / 3, 1 / 3), (0.0,), (0.0,))
+        for dy in dys[level]:
+            for dx in dxs[level]:
                 moves.append((dx * w, dy * h))
         for dx, dy in moves:
             key = (round(dx, 6), round(dy, 6))
@@ -204,6 +223,10 @@ def candidates(req: LabelRequest) -> tuple[np.ndarray, np.ndarray]:
         # around the text's start, as a point label (to the left of it, above, below)
         n0 = len(out)
         around(max(req.gap, 0.5), 0.0, req.x, req.y + h / 2.0)
+        if level == 2:  # only the position left of the start
+            del out[n0:], cost[n0:]
+            out.append((req.x - max(req.gap, 0.5) - w, req.y))
+            cost.append(0.0)
         for k in range(n0, len(out)):
             dx, dy = out[k][0] - req.x, out[k][1] - req.y
             cost[k] = _MOVE_COST * math.hypot(dx, dy) + 0.02
@@ -211,6 +234,40 @@ def candidates(req: LabelRequest) -> tuple[np.ndarray, np.ndarray]:
     c = np.array(cost, dtype=float)
     order = np.argsort(c, kind="stable")
     return xy[order], c[order]
+
+
+def _all_candidates(reqs: Sequence[LabelRequest], level: int):
+    """Every label's candidates: positions, costs, owning label, first index of each label."""
+    cand_xy, cand_cost, owner = [], [], []
+    for i, r in enumerate(reqs):
+        xy, costs = candidates(r, level)
+        cand_xy.append(xy)
+        cand_cost.append(costs)
+        owner.append(np.full(len(xy), i))
+    first = np.concatenate([[0], np.cumsum([len(c) for c in cand_xy])])
+    return np.vstack(cand_xy), np.concatenate(cand_cost), np.concatenate(owner), first
+
+
+def _pairs(geoms, own: np.ndarray, budget: int | None):
+    """Overlapping candidates of different labels ``(a, b)``, both ways; None past ``budget``."""
+    import shapely
+
+    tree = shapely.STRtree(geoms)
+    got_a, got_b, total = [], [], 0
+    step = 20000
+    for lo in range(0, len(geoms), step):
+        ia, ib = tree.query(geoms[lo : lo + step], predicate="intersects")
+        ia = ia + lo
+        keep = own[ia] != own[ib]
+        ia, ib = ia[keep].astype(np.int32), ib[keep].astype(np.int32)
+        total += len(ia)
+        if budget is not None and total > budget:
+            return None
+        got_a.append(ia)
+        got_b.append(ib)
+    if not got_a:
+        return np.zeros(0, np.int32), np.zeros(0, np.int32)
+    return np.concatenate(got_a), np.concatenate(got_b)
 
 
 def _boxes(reqs: Sequence[LabelRequest], xy: np.ndarray, owner: np.ndarray) -> np.ndarray:
@@ -257,18 +314,15 @@ def place_labels(
             progress(0, 0)
         e = np.zeros(0, dtype=np.int64)
         return Placement(np.zeros(0), np.zeros(0), e, e, e, e, e)
-    cand_xy, cand_cost, owner = [], [], []
-    for i, r in enumerate(reqs):
-        xy, costs = candidates(r)
-        cand_xy.append(xy)
-        cand_cost.append(costs)
-        owner.append(np.full(len(xy), i))
-    xy = np.vstack(cand_xy)
-    base_cost = np.concatenate(cand_cost)
-    own = np.concatenate(owner)
-    first = np.concatenate([[0], np.cumsum([len(c) for c in cand_xy])])
-    boxes = _boxes(reqs, xy, own)
-    geoms = shapely.box(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3])
+    # candidates, fewer where the full sets would overlap in too many pairs
+    for level in range(3):
+        xy, base_cost, own, first = _all_candidates(reqs, level)
+        boxes = _boxes(reqs, xy, own)
+        geoms = shapely.box(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3])
+        pairs = _pairs(geoms, own, PAIR_BUDGET if level < 2 else None)
+        if pairs is not None:
+            break
+    assert pairs is not None
     nc = len(boxes)
     if progress is not None:
         progress(1, 10)
@@ -289,8 +343,8 @@ def place_labels(
         tree = shapely.STRtree(segs)
         ci, si = tree.query(geoms, predicate="intersects")
         if len(ci):
-            pairs = np.unique(ci.astype(np.int64) * len(pieces) + line_of[si])
-            line_hits = np.bincount(pairs // len(pieces), minlength=nc)
+            hit_keys = np.unique(ci.astype(np.int64) * len(pieces) + line_of[si])
+            line_hits = np.bincount(hit_keys // len(pieces), minlength=nc)
     sym_hits = np.zeros(nc, dtype=np.int64)
     symbols = np.asarray(symbols, dtype=float).reshape(-1, 4)
     if len(symbols):
@@ -322,10 +376,7 @@ def place_labels(
         progress(3, 10)
 
     # candidate-candidate conflicts between different labels (CSR adjacency)
-    tree = shapely.STRtree(geoms)
-    a, b = tree.query(geoms, predicate="intersects")
-    keep = own[a] != own[b]
-    a, b = a[keep], b[keep]
+    a, b = pairs
     order = np.argsort(a, kind="stable")
     a, b = a[order], b[order]
     indptr = np.searchsorted(a, np.arange(nc + 1))
@@ -420,5 +471,5 @@ def place_labels(
         labels=lab_hits,
         frame=out_frame[cur].astype(np.int64),
         cost=float(static[cur].sum() + _W_LABEL * lab_hits.sum() / 2.0),
-        stats={"candidates": nc, "conflict_pairs": len(a) // 2},
+        stats={"candidates": nc, "conflict_pairs": len(a) // 2, "level": level},
     )

@@ -162,3 +162,30 @@ def test_label_box_is_the_font_measure():
     t = PaperText(1, 0.0, 0.0, 2.5, "Hy", "text", 0.0, 0.0)
     w, dsc = text_size("Hy", 2.5)
     assert label_box(t).bounds == pytest.approx((0.0, -dsc, w, 2.5))
+
+
+def test_a_crowded_sheet_weighs_fewer_candidates(monkeypatch):
+    """Past the pair budget, fewer candidates per label: bounded memory, same rules."""
+    import apygis.plot.labels as labels_mod
+
+    rng = np.random.default_rng(3)
+    reqs = [
+        LabelRequest(f"{k}", float(x), float(y), 2.0, 4.0, 0.5, "point", 1.0)
+        for k, (x, y) in enumerate(rng.uniform(0, 60, (300, 2)))
+    ]
+    full = place_labels(reqs, [], np.zeros((0, 4)), (0, 0, 60, 60))
+    assert full.stats["level"] == 0
+    monkeypatch.setattr(labels_mod, "PAIR_BUDGET", full.stats["conflict_pairs"])
+    fewer = place_labels(reqs, [], np.zeros((0, 4)), (0, 0, 60, 60))
+    assert fewer.stats["level"] >= 1
+    assert fewer.stats["candidates"] < full.stats["candidates"]
+    # what it reports is still what the boxes say
+    boxes = [(x, y - 0.5, x + 4.0, y + 2.0) for x, y in zip(fewer.x, fewer.y, strict=True)]
+    overlapping = sum(
+        any(
+            i != j and a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
+            for j, b in enumerate(boxes)
+        )
+        for i, a in enumerate(boxes)
+    )
+    assert int((fewer.labels > 0).sum()) == overlapping
