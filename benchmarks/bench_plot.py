@@ -1,7 +1,7 @@
 """Time of a big map sheet: layout with label placement, and every output.
 
 The map: a synthetic 1:10000 sheet of 6 x 4 km in LV95 with ``--lines``
-meandering lines of 100 points, 6 m apart (paths and outlines some 60 m
+meandering lines of 100 points, 4 m apart (paths and outlines some 40 m
 across: 200 000 line points by default), ``--spots`` spot heights and
 ``--texts`` names in several scripts (Latin with accents, Polish, Czech,
 Greek, Cyrillic), laid out on its own (A1 at 1:10000).
@@ -50,7 +50,7 @@ def make_map(lines: int, spots: int, texts: int, seed: int = 1) -> apygis.MapFil
     lay = {ext: m.layer(ext) for ext in "hr"}
     for k in range(lines):
         start = rng.uniform((E0, N0), (E0 + 6000, N0 + 4000))
-        steps = np.cumsum(rng.normal(0, 6, (100, 2)), axis=0)
+        steps = np.cumsum(rng.normal(0, 4, (100, 2)), axis=0)
         pts = np.clip(start + steps, (E0, N0), (E0 + 6000, N0 + 4000))
         lay["hr"[k % 2]].add_line([(float(x), float(y), 400.0) for x, y in pts], code=11 + k % 3)
     e = m.layer("e")
@@ -126,8 +126,8 @@ def best(f, repeat: int):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--lines", type=int, default=2000)
-    ap.add_argument("--spots", type=int, default=3000)
-    ap.add_argument("--texts", type=int, default=1000)
+    ap.add_argument("--spots", type=int, default=1500)
+    ap.add_argument("--texts", type=int, default=500)
     ap.add_argument("--repeat", type=int, default=2)
     args = ap.parse_args()
 
