@@ -21,7 +21,7 @@ from apygis.model.symbols import default_library
 from apygis.plot.drawing import build_drawing
 from apygis.plot.hpgl import drawing_hpgl, hatch_polygon, hatch_strokes, is_plotter_text
 from apygis.plot.pdf import A4_PT, drawing_pdf, text_page_capacity, text_pages, text_pages_pdf
-from apygis.plot.plotdef import read_plotdef
+from apygis.plot.plotdef import PlotterDef, read_plotdef
 from apygis.plot.primitives import FilledRects, PaperText
 from apygis.plot.printout import printout_text
 from apygis.plot.raster import MAX_PIXELS, drawing_png, drawing_rgba, drawing_tiff, raster_size
@@ -38,20 +38,20 @@ from tests.plot.helpers import (
 )
 
 LIB = default_library()
-SHEET = (2683000.0, 1247000.0)  # the sheet corner, the neat line's lower-left (PLOTTER.DEF)
 SCRIPTS = ("Zürich", "Łódź", "Ελλάδα", "Plzeň")
 
 
-@pytest.fixture(scope="module")
-def sheet(tmp_path_factory):
-    """The sample sheet laid out with samples/PLOTTER.DEF, and its map."""
+@pytest.fixture(scope="module", params=["plotter-def", "default"])
+def sheet(request, tmp_path_factory):
+    """The sample sheet laid out with samples/PLOTTER.DEF and without: map, drawing, definition."""
     from tests.conftest import _load_make_samples
 
     out = tmp_path_factory.mktemp("sheet")
     _load_make_samples().make(out)
     m = apygis.read(out / "ZH1091")
-    d = build_drawing(m, read_plotdef(PLOTTER_DEF), LIB, date="2024-01-01")
-    return m, d
+    pdef = read_plotdef(PLOTTER_DEF) if request.param == "plotter-def" else PlotterDef.default()
+    d = build_drawing(m, pdef, LIB, date="2024-01-01")
+    return m, d, pdef
 
 
 @pytest.fixture(scope="module")
@@ -65,11 +65,15 @@ def scripts_map():
 
 
 def paper_mm(d, x, y):
-    """Where the model's ground point (x, y) belongs on the sheet, from the sheet's corner."""
+    """Where the model's ground point (x, y) belongs: 1:5000 from the window's corner.
+
+    The window's lower-left is the neat line's (with samples/PLOTTER.DEF the sheet corner
+    2683000, 1247000: tests/plot/test_sheet.py).
+    """
     f = 1000.0 / 5000
     return (
-        d.frame[0] + (np.asarray(x) - SHEET[0]) * f,
-        d.frame[1] + (np.asarray(y) - SHEET[1]) * f,
+        d.frame[0] + (np.asarray(x) - d.window[0]) * f,
+        d.frame[1] + (np.asarray(y) - d.window[1]) * f,
     )
 
 
@@ -77,7 +81,7 @@ def paper_mm(d, x, y):
 
 
 def test_hpgl1_is_plain_hpgl(sheet):
-    _, d = sheet
+    _, d, _ = sheet
     data = drawing_hpgl(d)
     plot = hpgl_view.interpret(data, version=1)  # refuses PW, PC, WU ... of HP-GL/2
     ops = [op for op, _ in plot.instructions]
@@ -95,7 +99,7 @@ def test_hpgl1_is_plain_hpgl(sheet):
 
 
 def test_hpgl2_sets_widths_and_colours(sheet):
-    _, d = sheet
+    _, d, _ = sheet
     plot = hpgl_view.interpret(drawing_hpgl(d, version=2), version=2)
     used = d.used_pens()
     assert plot.widths_mm == {p: d.pens[p].width_mm for p in used}
@@ -107,10 +111,9 @@ def test_hpgl2_sets_widths_and_colours(sheet):
 
 
 def test_hpgl_lines_are_the_model_at_scale(sheet):
-    m, d = sheet
+    m, d, pdef = sheet
     plot = hpgl_view.interpret(drawing_hpgl(d))
     strokes = {tuple(map(tuple, pts.tolist())): pen for pen, pts in plot.strokes}
-    expected_pen = {("r", 11): 3, ("r", 13): 5, ("r", 21): 5, ("h", 31): 6}
     n = 0
     for ext in "hr":
         for pl in export_lines(m.layers[ext]):
@@ -127,13 +130,13 @@ def test_hpgl_lines_are_the_model_at_scale(sheet):
                 ]
                 assert near, (ext, pl.code)
                 got = near[0][1]
-            assert got == expected_pen.get((ext, pl.code), 2 if ext == "h" else 1)
+            assert got == pdef.pen_for(ext, "lines", int(pl.code))
             n += 1
     assert n == 18
 
 
 def test_hpgl_labels_and_symbols(sheet):
-    m, d = sheet
+    m, d, _ = sheet
     report = {}
     plot = hpgl_view.interpret(drawing_hpgl(d, report=report))
     text_items = [t for t in d.items if isinstance(t, PaperText) and t.text.strip()]
@@ -208,7 +211,7 @@ def test_hatching():
 
 def test_hpgl_renders_as_the_pin_plot(sheet, tmp_path):
     """The HP-GL, drawn by the test interpreter, shows the same sheet as the pin plot."""
-    _, d = sheet
+    _, d, _ = sheet
     plot = hpgl_view.interpret(drawing_hpgl(d))
     widths = {p: pen.width_mm for p, pen in d.pens.items()}
     picture = hpgl_view.render(plot, d.width_mm, d.height_mm, dpi=100, pen_widths=widths)
@@ -229,7 +232,7 @@ def _svg(d):
 
 
 def test_svg_lines_are_the_model_at_scale(sheet):
-    m, d = sheet
+    m, d, _ = sheet
     root = _svg(d)
     ns = {"s": SVG_NS}
     assert (root.get("width"), root.get("height"), root.get("viewBox")) == (
@@ -261,7 +264,7 @@ def test_svg_lines_are_the_model_at_scale(sheet):
 
 
 def test_svg_is_styled_so_that_lines_are_not_filled(sheet):
-    _, d = sheet
+    _, d, _ = sheet
     data = drawing_svg(d)
     root = ET.fromstring(data)
     ns = {"s": SVG_NS}
@@ -298,7 +301,7 @@ def test_svg_keeps_every_script(scripts_map):
 
 @pytest.mark.rsvg
 def test_rsvg_renders_the_svg_as_drawn(sheet, tmp_path):
-    _, d = sheet
+    _, d, _ = sheet
     svg = tmp_path / "sheet.svg"
     svg.write_bytes(drawing_svg(d))
     png = tmp_path / "sheet-svg.png"
@@ -334,7 +337,7 @@ def test_rsvg_draws_every_script(scripts_map, tmp_path):
 
 
 def test_pdf_of_the_sample(sheet):
-    _, d = sheet
+    _, d, _ = sheet
     pdf = drawing_pdf(d)
     assert pdf.startswith(b"%PDF-")
     assert pdf.rstrip().endswith(b"%%EOF")
@@ -350,7 +353,7 @@ def test_pdf_of_the_sample(sheet):
 
 @pytest.mark.poppler
 def test_pdftotext_reads_every_text(sheet, tmp_path):
-    m, d = sheet
+    m, d, _ = sheet
     f = tmp_path / "sheet.pdf"
     f.write_bytes(drawing_pdf(d))
     text = run_tool("pdftotext", "-raw", str(f), "-").stdout.decode("utf-8")
@@ -375,7 +378,7 @@ def test_pdf_keeps_every_script(scripts_map, tmp_path):
 
 @pytest.mark.poppler
 def test_pdftoppm_renders_the_pdf_as_drawn(sheet, tmp_path):
-    _, d = sheet
+    _, d, _ = sheet
     f = tmp_path / "sheet.pdf"
     f.write_bytes(drawing_pdf(d))
     run_tool("pdftoppm", "-r", "100", "-png", "-singlefile", str(f), str(tmp_path / "p"))
@@ -401,7 +404,7 @@ def test_texts_the_font_lacks_are_counted(caplog):
 
 
 def test_png_pin_plot(sheet):
-    m, d = sheet
+    m, d, _ = sheet
     data = drawing_png(d, dpi=120)
     import cv2
 
@@ -424,7 +427,7 @@ def test_png_pin_plot(sheet):
 def test_tiff_pin_plot_is_georeferenced(sheet):
     from rasterio.io import MemoryFile
 
-    m, d = sheet
+    m, d, _ = sheet
     data = drawing_tiff(d, dpi=100)
     with MemoryFile(data) as mem, mem.open() as ds:
         assert ds.crs.to_epsg() == 2056
@@ -437,12 +440,12 @@ def test_tiff_pin_plot_is_georeferenced(sheet):
         row, col = ds.index(float(s["x"]), float(s["y"]))
         assert (rgb[:, row - 2 : row + 3, col - 2 : col + 3].min(axis=0) < 200).any()
         # and the sheet's corner is the neat line's corner
-        row, col = ds.index(*SHEET)
+        row, col = ds.index(d.window[0], d.window[1])
         assert (rgb[:, row - 1 : row + 2, col - 1 : col + 2].min(axis=0) < 120).any()
 
 
 def test_a_pin_plot_too_large_is_refused_before_drawing(sheet):
-    _, d = sheet
+    _, d, _ = sheet
     w, h = raster_size(d.width_mm, d.height_mm, 2400)
     assert w * h > MAX_PIXELS
     with pytest.raises(FormatError, match=r"at 2400 dpi would be .*use \d+ dpi or less"):
