@@ -111,7 +111,7 @@ def _sources(path: str, layers) -> list[str]:
 @click.option(
     "--grid-interval",
     type=click.FloatRange(min=0, min_open=True),
-    help="Grid interval in the CRS's units (default: a round one, about 40 mm on paper).",
+    help="Grid interval in the CRS's units (default: a round one, at least 35 mm on paper).",
 )
 @click.option(
     "--control",
@@ -140,7 +140,7 @@ def _sources(path: str, layers) -> list[str]:
 )
 @click.option("--library", type=click.Path(), help="Symbol library (default: the user's).")
 @click.option("--src-driver", "--driver", "driver", help="Read the map with this driver.")
-@click.option("--src-crs", help="Assign this CRS to a map that has none (e.g. EPSG:2056).")
+@click.option("--src-crs", help="Assign this CRS to the map (as ogr2ogr -a_srs; a DXF has none).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
 @run_guarded
 def plot(

@@ -233,7 +233,7 @@ class PlotterDef:
         The coordinate grid: ``"crosses"``, ``"lines"`` or ``"off"``; it is
         labelled at the neat line unless off.
     grid_interval : float or None
-        Grid interval in CRS units; None chooses a round one (about 40 mm
+        Grid interval in CRS units; None chooses a round one (at least 35 mm
         on paper).
     frame : bool
         Draw the neat line.
