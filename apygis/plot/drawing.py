@@ -395,6 +395,30 @@ def _extent(layers, points: Sequence[ControlPoint]):
     return (min(xs0), min(ys0), max(xs1), max(ys1))
 
 
+def _label_reach(m: MapFile, exts, pdef: PlotterDef, control: bool) -> np.ndarray:
+    """Anchors of the labels and how far their preferred positions reach right and up, mm.
+
+    (n, 4): ground X, Y and the paper mm right and above: a text starts at its point, a
+    spot height's or control point's label starts right of its symbol.
+    """
+    th = pdef.text_height_mm
+    gap = max(pdef.symbol_size_mm / 2.0, pdef.symbol_size_mm * 2.5 / 15.0) + 0.4 * th
+    rows = []
+    for e in exts:
+        lay = m.layers[e]
+        sym = lay.symbols
+        if len(sym):
+            labelled = np.ones(len(sym), dtype=bool) if control else sym["code"] == SPOT_HEIGHT_CODE
+            for r in sym[labelled]:
+                z = f"{float(r['z']):.{pdef.height_decimals}f}"
+                text = f"{int(r['num'])}  {z}" if control else z
+                rows.append((float(r["x"]), float(r["y"]), gap + text_size(text, th)[0], th / 2.0))
+        if not control:
+            for r in lay.texts:
+                rows.append((float(r["x"]), float(r["y"]), text_size(str(r["text"]), th)[0], th))
+    return np.array(rows, dtype=float).reshape(-1, 4)
+
+
 def _in_window(x, y, window) -> np.ndarray:
     if window is None:
         return np.ones(np.shape(x), dtype=bool)
@@ -550,6 +574,21 @@ def build_drawing(
     unit_m, unit = _unit(crs)
     # a control plot covers the whole map, so that its grid orients the sheet
     extent = _extent(list(pm.layers.values()) if control else [pm.layers[e] for e in exts], points)
+    label_reach = _label_reach(pm, exts, pdef, control)
+
+    def extent_at(f: float):
+        """The data and its labels at their preferred positions (they are sized on paper)."""
+        if extent is None or not len(label_reach):
+            return extent
+        x = label_reach[:, 0] + label_reach[:, 2] / f
+        y = label_reach[:, 1] + label_reach[:, 3] / f
+        return (
+            extent[0],
+            extent[1],
+            max(extent[2], float(x.max())),
+            max(extent[3], float(y.max())),
+        )
+
     scale_for_layout = pdef.scale or m.scale
 
     # the margin panel's blocks (their heights decide the layout)
@@ -596,7 +635,7 @@ def build_drawing(
     blocks = blocks_for(provisional_scale, pf, interval0, "grid north")
     spec = PanelSpec(COLUMN_MM, tuple(b.height for b in blocks), pdef.title) if blocks else None
     band = 6.0 if style != "off" else 2.0
-    lay = plan_layout(extent, pdef, m.scale, unit_m, spec, band)
+    lay = plan_layout(extent_at, pdef, m.scale, unit_m, spec, band)
     f = lay.mm_per_unit
     interval = None if style == "off" else (pdef.grid_interval or grid_interval(f))
     if interval is not None and interval * f < MIN_GRID_MM:

@@ -142,7 +142,7 @@ class Layout:
     cut: bool = False
 
 
-def round_scales(lo: float = 100, hi: float = 1e8) -> list[int]:
+def round_scales(lo: float = 1, hi: float = 1e8) -> list[int]:
     """Round scale denominators 1, 2, 2.5, 5 x 10^k from ``lo`` to ``hi``, ascending.
 
     >>> round_scales(1000, 10000)
@@ -233,7 +233,13 @@ def _papers(pdef: PlotterDef, target_a3: bool) -> list[tuple[float, float, str]]
 
 
 def _window_from_extent(extent, f: float) -> tuple[float, float, float, float]:
-    """The data's extent padded by PAD_MM, rounded outward, at least MIN_WINDOW_MM."""
+    """The data's extent padded by PAD_MM, rounded outward, at least MIN_WINDOW_MM.
+
+    ``extent`` may be a callable of ``f`` (paper mm per ground unit): the data with
+    what is sized on paper (labels at their preferred positions) around it.
+    """
+    if callable(extent):
+        extent = extent(f)
     if extent is None:
         half = MIN_WINDOW_MM / 2.0 / f
         return (-half, -half, half, half)
@@ -294,7 +300,7 @@ def _fit(
 
 
 def plan_layout(
-    extent: tuple[float, float, float, float] | None,
+    extent,
     pdef: PlotterDef,
     map_scale: int | None,
     unit_m: float,
@@ -305,8 +311,9 @@ def plan_layout(
 
     Parameters
     ----------
-    extent : (float, float, float, float) or None
-        The plotted data's ``X0, Y0, X1, Y1`` (CRS units); None for no data.
+    extent : (float, float, float, float), callable or None
+        The plotted data's ``X0, Y0, X1, Y1`` (CRS units); None for no data; or
+        a callable giving it for ``mm_per_unit`` (the data and its labels).
     pdef : PlotterDef
         Paper, scale, origin or window, margins.
     map_scale : int or None
@@ -431,6 +438,8 @@ def _place(W, H, label, s, f, window, map_w, map_h, band, pdef, fit) -> Layout:
 def _plan_with_origin(extent, pdef, s, unit_m, panel, band, papers) -> Layout:
     """An ``origin`` fixes the ground on the paper; the neat line takes what the panel leaves."""
     f = unit_m * 1000.0 / s
+    if callable(extent):
+        extent = extent(f)
     X0, Y0 = pdef.origin
     ml, mb, mr, mt = pdef.margins_mm
     chosen = None

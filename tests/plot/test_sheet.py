@@ -17,6 +17,7 @@ from apygis.errors import FormatError, RecordError
 from apygis.model.polylines import export_lines
 from apygis.model.symbols import default_library
 from apygis.plot.drawing import ControlPoint, build_drawing, plot_date
+from apygis.plot.fonts import text_size
 from apygis.plot.layout import flow_columns, nice_step, round_scales
 from apygis.plot.margin import format_coordinate, grid_interval, scale_bar_length, wrap_text
 from apygis.plot.plotdef import parse_plotdef, read_plotdef
@@ -56,11 +57,20 @@ def all_boxes(d):
 def test_default_layout_of_the_sample(sample_map):
     d = build_drawing(sample_map, library=LIB)
     assert (d.width_mm, d.height_mm, d.paper, d.scale) == (594.0, 420.0, "A2 landscape", 5000)
-    # the window: the data padded by 3 mm (15 m) and rounded outward to 10 m (2 mm)
+    # the window: the data (and the labels at their preferred positions: texts from their
+    # points, spot heights right of their crosses) padded by 3 mm (15 m) and rounded
+    # outward to 10 m (2 mm)
     ext = [lay.extent() for lay in sample_map]
+    reach = max(e[3] for e in ext)
+    for s in sample_map.layers["e"].symbols:
+        label = text_size(f"{float(s['z']):.1f}", 2.5)[0]
+        reach = max(reach, float(s["x"]) + (1.5 + 1.0 + label) / 0.2)  # gap: half symbol + 0.4 h
+    for lay in sample_map:  # a text starts at its point and runs right
+        for t in lay.texts:
+            reach = max(reach, float(t["x"]) + text_size(str(t["text"]), 2.5)[0] / 0.2)
     x0 = math.floor((min(e[0] for e in ext) - 15) / 10) * 10
     y0 = math.floor((min(e[1] for e in ext) - 15) / 10) * 10
-    x1 = math.ceil((max(e[3] for e in ext) + 15) / 10) * 10
+    x1 = math.ceil((reach + 15) / 10) * 10
     y1 = math.ceil((max(e[4] for e in ext) + 15) / 10) * 10
     assert d.window == (x0, y0, x1, y1)
     f = d.mm_per_unit
