@@ -147,6 +147,8 @@ def round_scales(lo: float = 1, hi: float = 1e8) -> list[int]:
 
     >>> round_scales(1000, 10000)
     [1000, 2000, 2500, 5000, 10000]
+    >>> round_scales(1, 30)
+    [1, 2, 5, 10, 20, 25]
     """
     out: list[int] = []
     k = math.floor(math.log10(lo))
@@ -155,8 +157,8 @@ def round_scales(lo: float = 1, hi: float = 1e8) -> list[int]:
             v = m * 10**k
             if v > hi:
                 return out
-            if v >= lo:
-                out.append(round(v))
+            if v >= lo and v == int(v):  # a denominator is a whole number: no 1:2.5
+                out.append(int(v))
         k += 1
 
 
