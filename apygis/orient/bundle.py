@@ -1142,7 +1142,7 @@ def robust_adjust(
             # the last round's rejections left part of the block undetermined: they are
             # taken back and kept for good, and the rounds go on from before them
             revert_left -= 1
-            _, rejected, sigma, factors, weight, work, last = prev
+            rejected, sigma, factors, weight, work, last = prev
             for r in last:
                 if r.obs >= 0:
                     protected[r.obs] = True
@@ -1152,6 +1152,8 @@ def robust_adjust(
             continue
         if progress is not None:
             progress(rnd, max_rounds)
+        # the state this round started from (consistent: its problem holds these sigmas)
+        start = (list(rejected), sigma.copy(), dict(factors), weight.copy(), work)
         found = _snoop(work, sol, weight, level, rnd, robust_scale=level > threshold,
                        protected=protected, protected_ctrl=protected_ctrl)  # fmt: skip
         rescaled = False
@@ -1178,7 +1180,7 @@ def robust_adjust(
             if exact:
                 final = True
             exact = True
-        prev = (sol, list(rejected), sigma.copy(), dict(factors), weight.copy(), work, found)
+        prev = (*start, found)
         rejected += found
         cs = work.ctrl_sigma.copy()
         for r in found:
