@@ -124,6 +124,13 @@ def block_info(block: Block) -> dict:
             "per_image_min": int(min(per_image.values())) if per_image else 0,
         },
         "gaps": gaps,
+        "control_measured": int(
+            block.conn.execute(
+                "SELECT COUNT(DISTINCT o.point) FROM observations o JOIN points p "
+                "ON p.id = o.point WHERE p.kind != 'tie'"
+            ).fetchone()[0]
+        ),
+        "adjustment": _last_adjustment(block),
         "runs": [
             {k: r[k] for k in ("id", "command", "started", "finished", "status")}
             for r in block.runs()
@@ -142,6 +149,24 @@ def _interior_summary(d: dict | None) -> dict | None:
         "dihedral": d.get("dihedral"),
         "missing": d.get("missing", []),
     }
+
+
+def _last_adjustment(block: Block) -> dict | None:
+    """The last adjustment's headline figures (None before one)."""
+    import json
+
+    row = block.conn.execute(
+        "SELECT id, finished, report FROM adjustments WHERE report IS NOT NULL "
+        "ORDER BY id DESC LIMIT 1"
+    ).fetchone()
+    if row is None:
+        return None
+    r = json.loads(row[2])
+    return {
+        "id": row[0], "finished": row[1], "images": r["images"], "sigma0_px": r["sigma0_px"],
+        "sigma0_um": r["sigma0_um"], "observations": r["observations"],
+        "rejected": r["rejected"], "object_rms_m": r.get("object_rms_m"),
+    }  # fmt: skip
 
 
 def info_text(info: dict) -> str:
@@ -203,6 +228,19 @@ def info_text(info: dict) -> str:
         )
         for k, regions in sorted(info["gaps"].items()):
             lines.append(f"  model {k}: regions {', '.join(str(r) for r in regions)}")
+    if info.get("control_measured"):
+        lines.append(f"control and new points measured: {info['control_measured']}")
+    a = info.get("adjustment")
+    if a:
+        rms = a["object_rms_m"]
+        lines.append(
+            f"adjustment {a['id']} ({a['finished']}): {a['images']} images, sigma0 "
+            f"{a['sigma0_px']:.3f} px = {a['sigma0_um']:.2f} um, {a['observations']} "
+            f"observations ({a['rejected']} rejected)"
+            + (f", check points rms {rms[0]:.3f} {rms[1]:.3f} {rms[2]:.3f} m" if rms else "")
+        )
+    else:
+        lines.append("adjustment: none yet ('apygis at adjust')")
     return "\n".join(lines) + "\n"
 
 
