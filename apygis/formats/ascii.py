@@ -37,7 +37,14 @@ from apygis.formats._io import atomic_write_many, check_resolution, read_bytes
 from apygis.formats._readguard import ascii_int, check_coords
 from apygis.formats._text import digit_columns, put_right
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
-from apygis.model.records import LINE_DTYPE, NO_REF, REF_FIELDS, SYMBOL_DTYPE, TEXT_DTYPE
+from apygis.model.records import (
+    LINE_DTYPE,
+    NO_REF,
+    REF_FIELDS,
+    SYMBOL_DTYPE,
+    TEXT_DTYPE,
+    TEXT_LEN,
+)
 
 __all__ = ["DRIVER", "read", "write"]
 
@@ -436,8 +443,15 @@ def _read_texts(rd: _Reader, n: int) -> np.ndarray:
             text = check_text(line[TEXT_COL:])
         except ValueError as exc:
             rd.fail(str(exc))
+        if len(text) > TEXT_LEN:
+            rd.fail(
+                f"a text has at most {TEXT_LEN} characters in APY ASCII, {text!r} has {len(text)}"
+            )
         rows.append((row["num"], row["x"], row["y"], row["z"], text))
-    return np.array(rows, dtype=TEXT_DTYPE) if rows else np.zeros(0, TEXT_DTYPE)
+    out = np.zeros(len(rows), TEXT_DTYPE)
+    for k, r in enumerate(rows):
+        out[k] = r
+    return out
 
 
 # --------------------------------------------------------------------------- API

@@ -440,12 +440,11 @@ def encode(map_: MapFile, library=None, dxfversion: str = "R2010", path=None, pr
     return data
 
 
-def write(
-    map_: MapFile, path, progress=None, library=None, dxfversion: str = "R2010"
-) -> list[Path]:
+def write(map_: MapFile, path, progress=None, version: str = "R2010") -> list[Path]:
     """Write a map as one DXF file, atomically; returns ``[path]``.
 
-    See :func:`encode` for the options.
+    ``version``: ``"R2010"`` (default), ``"R2013"`` or ``"R2018"``; see
+    :func:`encode`. The symbol blocks are drawn from the user's symbol library.
     """
-    data = encode(map_, library=library, dxfversion=dxfversion, path=path, progress=progress)
+    data = encode(map_, dxfversion=version, path=path, progress=progress)
     return atomic_write_many({Path(path): data})
