@@ -66,3 +66,7 @@ def info(path: str, driver: str | None, as_json: bool) -> None:
             click.echo(f"  {i['severity']}: layer {ext}: {i['message']}")
     else:
         click.echo("\n  no validation findings")
+    if s["read_warnings"]:
+        click.echo("")
+        for w in s["read_warnings"]:
+            click.echo(f"  read: {w['message']}")

@@ -339,9 +339,7 @@ def _report(path, stats: Counter, names: _Layers) -> None:
             continue
         kind = key[5:]
         reason = skip_reason(kind.split(" ")[0])
-        if kind == "ATTRIB (invisible)":
-            reason = "invisible attributes are not drawn"
-        elif kind.endswith("(no geometry)"):
+        if kind.endswith("(no geometry)"):
             reason = "ezdxf could not render its parts"
         elif kind in ("POLYFACE", "POLYMESH"):
             reason = "surfaces are not supported"

@@ -340,8 +340,8 @@ def _insert(e, c: _Collect, opts: dict, stats: Counter, what: str) -> None:
 
     The block ``APY_SYM_NN`` apygis writes carries its point number, code and
     height in the attributes ``NUM``, ``CODE``, ``Z``: those are the symbol's.
-    Every other visible attribute (``ATTRIB``) is a text at its own place,
-    on its own layer (as GDAL reads them).
+    Every other attribute (``ATTRIB``, invisible ones too: they are data) is a
+    text at its own place, on its own layer, as GDAL reads them.
     """
     attribs: dict[str, Any] = {}
     for a in e.attribs:
@@ -356,10 +356,7 @@ def _insert(e, c: _Collect, opts: dict, stats: Counter, what: str) -> None:
         c.sym.append((num if k == 0 else None, *pos, code))
         if own:
             continue
-        for a in v.attribs:
-            if a.dxf.get("flags", 0) & 1:  # invisible
-                stats["skip:ATTRIB (invisible)"] += 1
-                continue
+        for a in v.attribs:  # invisible ones too: data, as GDAL reads them
             text = a.plain_text() if hasattr(a, "plain_text") else str(a.dxf.get("text", ""))
             if not text.strip():
                 continue
