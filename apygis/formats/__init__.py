@@ -187,7 +187,7 @@ def parse_options(drv: Driver, mode: str, given: dict[str, str], shown=None) -> 
         opt = drv.option(mode, name)
         where = (shown or {}).get(name, f"--co {name.upper()}={text}")
         if opt is None:
-            raise DriverError(f"{where}: {drv.no_option(mode, name)}")
+            raise DriverError(f"{where}: {drv.no_option(mode, name, cli=True)}")
         out[opt.name] = opt.parse(text, where)
     return out
 
@@ -247,10 +247,18 @@ class Driver:
         low = name.lower()
         return next((o for o in self.options if o.mode == mode and o.name == low), None)
 
-    def no_option(self, mode: str, name: str) -> str:
-        """The message for an option ``name`` that the reader or writer does not take."""
+    def no_option(self, mode: str, name: str, cli: bool = False) -> str:
+        """The message for an option ``name`` that the reader or writer does not take.
+
+        ``cli``: the options are listed as typed at the command line (their own
+        flags, else ``--co NAME``), otherwise as the keywords of the function.
+        """
         verb = "reader" if mode == "r" else "writer"
-        have = [o.flag or o.name.upper() for o in self.options if o.mode == mode]
+        have = [
+            (o.flag or f"--co {o.name.upper()}") if cli else o.name
+            for o in self.options
+            if o.mode == mode
+        ]
         known = f"it takes {', '.join(have)}" if have else "it takes none"
         return f"the {self.name} {verb} has no option {name!r} ({known})"
 

@@ -31,8 +31,8 @@ from typing import Any, NoReturn
 import numpy as np
 
 from apygis.errors import FormatError
-from apygis.formats import Driver
-from apygis.formats._apycommon import check_layer_for_apy, cm_to_m, m_to_cm
+from apygis.formats import Driver, Option
+from apygis.formats._apycommon import check_layer_for_apy, cm_to_m, fit_texts, m_to_cm
 from apygis.formats._io import atomic_write_many, check_resolution, read_bytes
 from apygis.formats._readguard import ascii_int, check_coords
 from apygis.formats._text import digit_columns, put_right
@@ -474,12 +474,14 @@ def read(path, progress=None) -> MapFile:
     return m
 
 
-def write(map_: MapFile, path, progress=None) -> list:
+def write(map_: MapFile, path, progress=None, cut_texts: bool = False) -> list:
     """Write a map as APY ASCII, atomically.
 
     A map whose CRS unit makes centimetres of a unit coarser than 1 cm (degrees)
-    is refused: the format stores hundredths of a unit.
+    is refused: the format stores hundredths of a unit. Texts longer than 24
+    characters are refused, or with ``cut_texts`` cut (with a warning).
     """
+    map_ = fit_texts(map_, path, cut_texts)
     check_resolution(map_, path, 0.01, "APY ASCII stores coordinates in hundredths of a unit")
     from pathlib import Path
 
@@ -496,4 +498,6 @@ DRIVER = Driver(
     reader=read,
     writer=write,
     probe=probe,
+    stream=True,
+    options=(Option("cut_texts", "w", "bool", "cut texts to APY's 24 characters"),),
 )
