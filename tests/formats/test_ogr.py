@@ -333,7 +333,8 @@ def test_foreign_gpkg_imports_with_rebuilt_topology(tmp_path):
     assert m.id == "foreign"
     assert m.crs_string() == "EPSG:2056"
     assert m.scale is None
-    assert sorted(m.layers) == ["h", "r", "x", "y"]  # trees -> x, names -> y
+    # one map layer per OGR layer, named from it: trees -> tre, names -> nam
+    assert sorted(m.layers) == ["h", "nam", "r", "tre"]
     roads = m.layers["r"]
     assert roads.counts()["closed_lines"] == 1
     assert roads.counts()["lines"] == 2
@@ -352,10 +353,10 @@ def test_foreign_gpkg_imports_with_rebuilt_topology(tmp_path):
     pond = m.layers["h"]
     assert pond.counts()["closed_lines"] == 2  # the shore and the island
     assert (pond.line_points["code"] == 7).all()  # no code field: the default
-    trees = m.layers["x"].symbols
+    trees = m.layers["tre"].symbols
     assert trees["code"].tolist() == [23, 7]
     assert trees["z"].tolist() == [400, 401]
-    names = m.layers["y"].texts
+    names = m.layers["nam"].texts
     assert names["text"].tolist() == ["Dorfplatz"]
     assert names["num"].tolist() == [1]
 
@@ -404,7 +405,7 @@ def test_foreign_shapefile_zip_and_geojson(tmp_path):
     )
     m = apygis.read(d / "wells.shp")
     assert m.id == "wells"
-    assert m.layers["x"].symbols["code"].tolist() == [26, 27]
+    assert m.layers["wel"].symbols["code"].tolist() == [26, 27]  # layer wells: map layer wel
     with zipfile.ZipFile(tmp_path / "wells.shz", "w") as z:
         for p in d.iterdir():
             z.write(p, p.name)
@@ -414,7 +415,10 @@ def test_foreign_shapefile_zip_and_geojson(tmp_path):
     pyogrio.raw.write(gj, pts, [], [], driver="GeoJSON", geometry_type="Point")
     m = apygis.read(gj)  # no crs member: RFC 7946's WGS 84
     assert m.crs_string() == "EPSG:4326"
-    assert len(m.layers["x"].symbols) == 2
+    (lay,) = m.layers.values()  # the layer w: map layer w
+    assert lay.ext == "w"
+    # 2-D points without a code field: imported points (90), not spot heights
+    assert lay.symbols["code"].tolist() == [90, 90]
 
 
 # --------------------------------------------------------------------------- errors
@@ -470,7 +474,7 @@ def test_bad_input_raises_format_errors(tmp_path, sample_map):
         apygis.read(two, driver="fgb")
     assert apygis.read(two / "B.fgb") == sample_map
 
-    with pytest.raises(DriverError, match="layer_map"):
+    with pytest.raises(DriverError, match="layer map"):
         apygis.read(junk, driver="gpkg", layer_map="roads")
     with pytest.raises(DriverError, match="default_code"):
         apygis.read(junk, driver="gpkg", default_code=100)

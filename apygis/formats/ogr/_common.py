@@ -20,7 +20,7 @@ import numpy as np
 
 from apygis.errors import FormatError
 from apygis.model.map import check_text
-from apygis.model.records import MAX_CODE, NO_REF, TEXT_DTYPE
+from apygis.model.records import MAX_CODE, NO_REF
 
 log = logging.getLogger("apygis.formats.ogr")  # one logger for the package (the edits report)
 
@@ -161,7 +161,8 @@ def _null_mask(values) -> np.ndarray:
 
 
 def _texts(values, name: str, src: _Source) -> np.ndarray:
-    out = np.empty(len(values), dtype=TEXT_DTYPE["text"])
+    """A text column as an object array of ``str`` (whole: the model has no length limit)."""
+    out = np.empty(len(values), dtype=object)
     for k, v in enumerate(values):
         if v is None:
             v = ""
