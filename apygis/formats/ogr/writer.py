@@ -364,7 +364,7 @@ def _copy_part(con) -> None:
             f"WHERE name IN ({marks})",
             names,
         )
-    for t, n, tbl, sql in objects:
+    for t, _, tbl, sql in objects:
         if t in ("trigger", "index") and sql and tbl not in system:
             con.execute(sql)
 
