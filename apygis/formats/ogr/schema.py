@@ -72,14 +72,8 @@ _GPKG = _Format("gpkg", "GPKG", ("gpkg",), multi=True)
 _SHP = _Format("shp", "ESRI Shapefile", ("shp",), multi=False, containers=("shz", "zip"))
 
 
-# 17 significant digits: every float64 comes back bit for bit (GDAL writes 15 decimals)
-_GEOJSON = _Format(
-    "geojson",
-    "GeoJSON",
-    ("geojson", "json"),
-    multi=False,
-    layer_options={"SIGNIFICANT_FIGURES": "17"},
-)
+# written by apygis.formats.ogr.geojson (RFC 7946 in EPSG:4326; every float64 exactly)
+_GEOJSON = _Format("geojson", "GeoJSON", ("geojson", "json"), multi=False)
 
 
 # no spatial index: it would reorder the features (and refuses NULL geometries)

@@ -19,6 +19,7 @@ from apygis.errors import DriverError
 from apygis.formats.ogr._common import _gdal, _WriteError, _xyz
 from apygis.formats.ogr.schema import (
     _DBF_BYTES,
+    _GEOJSON,
     _SHP,
     _SHP_CHUNK,
     MAP_TABLE,
@@ -201,6 +202,14 @@ def _tables(map_: MapFile, fmt: _Format, crs: str | None) -> list[_Table]:
 
 def _write_table(path: Path, fmt: _Format, table: _Table, crs: str | None) -> None:
     import pyogrio.raw
+
+    if fmt is _GEOJSON:
+        from pyproj import CRS
+
+        from apygis.formats.ogr.geojson import write_geojson
+
+        write_geojson(path, path.stem, table, None if crs is None else CRS.from_user_input(crs))
+        return
 
     masks = table.masks if any(m is not None for m in table.masks) else None
     _gdal(
