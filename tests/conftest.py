@@ -31,11 +31,42 @@ EXTERNAL_WHY = (
 )
 
 
-def pytest_collection_modifyitems(config, items):
-    """Tests marked ``external`` are skipped, with the reason, when the folder is absent.
+QGIS_WHY = (
+    "needs QGIS for the system Python: Debian's python3-qgis "
+    "(apt-get install python3-qgis; .ci/run installs it under CI=true)"
+)
 
-    Under CI (``CI`` set) an absent folder is an error instead, so CI always runs them.
+
+def _have_qgis() -> bool:
+    import subprocess
+
+    try:
+        res = subprocess.run(
+            ["/usr/bin/python3", "-c", "import qgis.core"],
+            capture_output=True,
+            timeout=60,
+            env={**os.environ, "QT_QPA_PLATFORM": "offscreen"},
+        )
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return res.returncode == 0
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests marked ``external`` are skipped, with the reason, when the folder is absent;
+    tests marked ``qgis`` when QGIS for the system Python is not installed.
+
+    Under CI (``CI`` set) either is an error instead, so CI always runs them.
     """
+    qgis = [item for item in items if item.get_closest_marker("qgis")]
+    if qgis and not _have_qgis():
+        if os.environ.get("CI"):
+            raise pytest.UsageError(
+                f"CI is set and {len(qgis)} collected tests are marked qgis, but "
+                "/usr/bin/python3 cannot import qgis.core: .ci/run installs python3-qgis"
+            )
+        for item in qgis:
+            item.add_marker(pytest.mark.skip(reason=QGIS_WHY))
     if EXTERNAL.is_dir():
         return
     marked = [item for item in items if item.get_closest_marker("external")]

@@ -139,7 +139,15 @@ def outputs(map_: MapFile, path, fmt="gpkg") -> list[Path]:
     ]
 
 
-def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = True) -> list[Path]:
+def write(
+    map_: MapFile,
+    path,
+    fmt="gpkg",
+    progress=None,
+    spatial_index: bool = True,
+    version: str | None = None,
+    styles: bool = True,
+) -> list[Path]:
     """Write ``map_`` in an OGR format, atomically; returns the files written.
 
     Parameters
@@ -158,6 +166,12 @@ def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = 
         GeoPackage only: give every spatial layer an R-tree index (GDAL's
         default). Without, a map of many layers is written about a third
         faster; GIS programs draw small layers as fast either way.
+    version : str, optional
+        GeoPackage only: ``"1.2"`` (default, which GDAL 3.6 and QGIS LTR
+        builds open without warnings), ``"1.3"`` or ``"1.4"``.
+    styles : bool
+        GeoPackage only: QGIS styles in ``layer_styles`` and descriptions
+        in ``gpkg_contents`` (default; :mod:`apygis.formats.ogr.styles`).
 
     Returns
     -------
@@ -166,6 +180,8 @@ def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = 
     fmt = _fmt(fmt)
     if fmt.multi and not spatial_index:
         fmt = replace(fmt, layer_options={**fmt.layer_options, "SPATIAL_INDEX": "NO"})
+    if version is not None and version not in ("1.2", "1.3", "1.4"):
+        raise DriverError(f"GeoPackage version {version!r}: 1.2, 1.3 or 1.4")
     crs = crs_string(map_.crs)
     if fmt.multi:
         target = Path(path)
@@ -199,13 +215,14 @@ def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = 
             with _sqlite_unsynced(fmt):
                 _write_tables(
                     tmp,
-                    fmt,
+                    fmt if version is None else replace(fmt, dataset_version=version),
                     tables,
                     names,
                     target.name if fmt.multi else None,
                     crs,
                     progress,
                     target.parent if fmt.multi else directory,
+                    _gpkg_extras(map_, tables, styles) if fmt.multi else None,
                 )
             if fmt.multi:
                 _fsync(tmp / target.name)
@@ -231,6 +248,28 @@ def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = 
         return [directory / n for n in made]
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _gpkg_extras(map_: MapFile, tables, styles: bool) -> dict:
+    """Descriptions of every table and, with ``styles``, QGIS styles of the spatial ones."""
+    from apygis.formats.ogr import styles as st
+
+    desc, qml = {}, {}
+    library = None
+    for t in tables:
+        parsed = _parse_name(t.name)
+        if parsed is None:
+            continue
+        _, ext, kind = parsed
+        desc[t.name] = st.description(t.name, kind, ext, map_.id)
+        if styles and kind != "map":
+            codes = map_.layers[ext].symbols["code"].tolist() if kind == "symbols" else ()
+            if kind == "symbols" and library is None:
+                from apygis.model.symbols import load_library
+
+                library = load_library()
+            qml[t.name] = st.qml(kind, ext, codes, library)
+    return {"descriptions": desc, "styles": qml}
 
 
 def members(path, fmt) -> tuple[Path, list[Path], bool] | None:

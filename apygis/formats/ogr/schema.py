@@ -60,6 +60,7 @@ class _Format:
     multi: bool  # one file holds every OGR layer (GeoPackage)
     layer_options: dict = field(default_factory=dict)
     containers: tuple[str, ...] = ()  # multi-layer files this driver also reads (zip)
+    dataset_version: str | None = None  # GeoPackage: the VERSION written (None: the default)
 
     @property
     def ext(self) -> str:

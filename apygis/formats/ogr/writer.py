@@ -224,7 +224,9 @@ def _write_table(path: Path, fmt: _Format, table: _Table, crs: str | None) -> No
             geometry_type=table.geometry_type,
             crs=crs if table.geometry_type is not None else None,
             layer_options=fmt.layer_options or None,
-            dataset_options={"VERSION": GPKG_VERSION} if fmt.ogr == "GPKG" else None,
+            dataset_options=(
+                {"VERSION": fmt.dataset_version or GPKG_VERSION} if fmt.ogr == "GPKG" else None
+            ),
         ),
         "cannot write",
         path,
@@ -267,7 +269,15 @@ def _tables_skeleton(map_: MapFile) -> list[_Table]:
 
 
 def _write_tables(
-    tmp: Path, fmt: _Format, tables, names, single: str | None, crs, progress, final: Path
+    tmp: Path,
+    fmt: _Format,
+    tables,
+    names,
+    single: str | None,
+    crs,
+    progress,
+    final: Path,
+    extras: dict | None = None,
 ):
     """Every table into ``tmp``: one file each (folder formats), or one GeoPackage.
 
@@ -293,7 +303,7 @@ def _write_tables(
         if progress:
             progress(k + 1, steps)
     if single is not None:
-        _merge_gpkg(parts, tmp / single)
+        _merge_gpkg(parts, tmp / single, extras or {})
         if progress:
             progress(steps, steps)
 
@@ -301,7 +311,7 @@ def _write_tables(
 _GPKG_ROWS = ("gpkg_contents", "gpkg_geometry_columns", "gpkg_extensions", "gpkg_ogr_contents")
 
 
-def _merge_gpkg(parts: list[Path], target: Path) -> None:
+def _merge_gpkg(parts: list[Path], target: Path, extras: dict) -> None:
     """GeoPackages of one table each (all made by GDAL) as one GeoPackage ``target``.
 
     The first part becomes the target; from each other part, attached with
@@ -310,6 +320,9 @@ def _merge_gpkg(parts: list[Path], target: Path) -> None:
     ``gpkg_geometry_columns``, ``gpkg_extensions`` and ``gpkg_ogr_contents``,
     its CRS in ``gpkg_spatial_ref_sys`` and then its triggers (created after
     the data: they call GDAL's SQL functions, which this connection lacks).
+    ``extras``: ``descriptions`` (table -> text for ``gpkg_contents``) and
+    ``styles`` (table -> QGIS QML for ``layer_styles``), see
+    :mod:`apygis.formats.ogr.styles`.
     """
     import sqlite3
 
@@ -326,9 +339,41 @@ def _merge_gpkg(parts: list[Path], target: Path) -> None:
             con.execute("DETACH DATABASE part")
             con.execute("BEGIN")
             part.unlink()
+        for table, text in extras.get("descriptions", {}).items():
+            con.execute(
+                "UPDATE gpkg_contents SET description = ? WHERE table_name = ?", (text, table)
+            )
+        if extras.get("styles"):
+            _layer_styles(con, extras["styles"])
         con.execute("COMMIT")
     finally:
         con.close()
+
+
+def _layer_styles(con, styles: dict[str, str]) -> None:
+    """QGIS's ``layer_styles`` table with one default style per table (QGIS's schema)."""
+    con.execute(
+        'CREATE TABLE "layer_styles" ("id" INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, '
+        '"f_table_catalog" TEXT(256), "f_table_schema" TEXT(256), "f_table_name" TEXT(256), '
+        '"f_geometry_column" TEXT(256), "styleName" TEXT(30), "styleQML" TEXT, '
+        '"styleSLD" TEXT, "useAsDefault" BOOLEAN, "description" TEXT, "owner" TEXT(30), '
+        '"ui" TEXT(30), "update_time" DATETIME DEFAULT '
+        "(strftime('%Y-%m-%dT%H:%M:%fZ','now')))"
+    )
+    con.executemany(
+        'INSERT INTO "layer_styles" ("f_table_catalog", "f_table_schema", "f_table_name", '
+        '"f_geometry_column", "styleName", "styleQML", "styleSLD", "useAsDefault", '
+        "\"description\", \"owner\") VALUES ('', '', ?, 'geom', ?, ?, '', 1, ?, 'apygis')",
+        [(t, t, q, f"apygis default style of {t}") for t, q in styles.items()],
+    )
+    con.execute(
+        "INSERT INTO gpkg_contents (table_name, data_type, identifier, description) "
+        "VALUES ('layer_styles', 'attributes', 'layer_styles', 'QGIS styles of the layers')"
+    )
+    con.execute(
+        "INSERT INTO gpkg_ogr_contents (table_name, feature_count) VALUES ('layer_styles', ?)",
+        (len(styles),),
+    )
 
 
 def _copy_part(con) -> None:
