@@ -286,12 +286,14 @@ def _write_tables(
     schema of every table already in it, so a map of n layers took O(n²)
     (103 s for 200 layers). Each table goes into a GeoPackage of its own,
     written by GDAL as usual, and :func:`_merge_gpkg` copies them into the
-    first one with SQLite, once.
+    first one with SQLite, once. (A part holds up to ``_PART_TABLES`` tables:
+    creating a GeoPackage costs more than reopening a small one.)
     """
     parts: list[Path] = []
     steps = len(tables) + (1 if single is not None else 0)
     for k, table in enumerate(tables):
-        name = f".part{k}.gpkg" if single is not None else names[table.name][0]
+        part = k // _PART_TABLES
+        name = f".part{part}.gpkg" if single is not None else names[table.name][0]
         dest = tmp / name
         try:
             _write_table(dest, fmt, table, crs)
@@ -299,7 +301,8 @@ def _write_tables(
             shown = single if single is not None else name
             where = ": ".join(x for x in (str(final / shown), exc.record) if x)
             raise DriverError(f"{where}: {exc.reason}") from None
-        parts.append(dest)
+        if not parts or parts[-1] != dest:
+            parts.append(dest)
         if progress:
             progress(k + 1, steps)
     if single is not None:
@@ -307,6 +310,8 @@ def _write_tables(
         if progress:
             progress(steps, steps)
 
+
+_PART_TABLES = 8
 
 _GPKG_ROWS = ("gpkg_contents", "gpkg_geometry_columns", "gpkg_extensions", "gpkg_ogr_contents")
 
