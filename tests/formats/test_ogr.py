@@ -60,6 +60,8 @@ def test_gdal_reads_every_writer(sample_map, tmp_path, name):
         expected |= {f"{lay.ext}_line_points"} if c["line_points"] else set()
         expected |= {f"{lay.ext}_areas"} if c["closed_lines"] else set()
         expected |= {f"{lay.ext}_lines"} if c["lines"] > c["closed_lines"] else set()
+    if name == "gpkg":
+        expected.add("layer_styles")  # QGIS's styles (test_gpkg_styles.py)
     assert set(layers) == expected
 
     for lay in sample_map:
@@ -201,6 +203,7 @@ def test_gpkg_layers_header_and_empty_layers(tmp_path):
     apygis.write(m, tmp_path / "e.gpkg")
     assert sorted(str(n) for n, _ in pyogrio.list_layers(tmp_path / "e.gpkg")) == [
         "apygis_map",
+        "layer_styles",
         "r_symbols",
     ]
     back = apygis.read(tmp_path / "e.gpkg")
@@ -254,6 +257,7 @@ def test_progress_is_reported(sample_map, tmp_path):
     calls.clear()
     apygis.read(tmp_path / "p.gpkg", progress=lambda d, t: calls.append((d, t)))
     layers = [str(n) for n, _ in pyogrio.list_layers(tmp_path / "p.gpkg")]
+    layers.remove("layer_styles")  # no geometry, no map layer: not read
     # every layer is read: L_lines and L_areas are checked against L_line_points for edits
     assert calls[-1][0] == calls[-1][1] == len(layers) == len(calls)
 
