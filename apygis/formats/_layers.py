@@ -113,7 +113,8 @@ class LayerNames:
     map layer by the same rule when first asked for.
     """
 
-    def __init__(self, layer_map=None, sources: Iterable[str] = ()):
+    def __init__(self, layer_map=None, sources: Iterable[str] = (), where=None):
+        self.where = f"{where}: " if where else ""
         self.map = parse_layer_map(layer_map)
         self._upper = {k.upper(): v for k, v in self.map.items()}
         self._ext: dict[str, str | None] = {}  # upper-case source name -> ext
@@ -167,20 +168,46 @@ class LayerNames:
         if unknown:
             listed = ", ".join(sorted(set(present), key=str.upper)) or "none"
             raise DriverError(
-                f"layer map names {', '.join(repr(u) for u in unknown)}, which the file does "
-                f"not have (its layers: {listed})"
+                f"{self.where}layer map names {', '.join(repr(u) for u in unknown)}, which the "
+                f"file does not have (its layers: {listed})"
             )
 
-    def select(self, wanted, present: Iterable[str]) -> set[str] | None:
-        """The upper-case source layers to read (None: all); unknown ``wanted`` are refused."""
+    def select(self, wanted, present: Iterable[str], groups=None) -> set[str] | None:
+        """The upper-case source layers to read (None: all); unknown ``wanted`` are refused.
+
+        ``groups`` maps other names (the map layer ``r`` of apygis's own
+        OGR layers ``r_lines``, ...) to the source layers they stand for.
+        """
         if wanted is None:
             return None
         wanted = [wanted] if isinstance(wanted, str) else list(wanted)
         have = {p.upper(): p for p in present}
-        unknown = [w for w in wanted if str(w).upper() not in have]
+        groups = {str(k).upper(): v for k, v in (groups or {}).items()}
+        out: set[str] = set()
+        unknown = []
+        for w in wanted:
+            key = str(w).upper()
+            if key in have:
+                out.add(key)
+            elif key in groups:
+                out |= {g.upper() for g in groups[key]}
+            else:
+                unknown.append(w)
         if unknown:
             listed = ", ".join(sorted(have.values(), key=str.upper)) or "none"
+            extra = sorted(k.lower() for k in groups if k not in have)
+            also = f"; map layers {', '.join(extra)}" if extra else ""
             raise DriverError(
-                f"no layer {', '.join(repr(u) for u in unknown)} in the file (its layers: {listed})"
+                f"{self.where}no layer {', '.join(repr(u) for u in unknown)} in the file "
+                f"(its layers: {listed}{also})"
             )
-        return {str(w).upper() for w in wanted}
+        return out
+
+    def groups(self, names: Iterable[str]) -> dict[str, list[str]]:
+        """Map layer -> the source layers among ``names`` that become it (for ``select``)."""
+        out: dict[str, list[str]] = {}
+        for n in names:
+            ext = self(n)
+            if ext is not None:
+                out.setdefault(ext, []).append(n)
+        return out

@@ -34,8 +34,9 @@ class _Layers:
     first entity, refusing ``layer_map`` and ``layers`` names it lacks.
     """
 
-    def __init__(self, layer_map, layers):
+    def __init__(self, layer_map, layers, where=None):
         parse_layer_map(layer_map)  # a bad option fails before the file is read
+        self.where = where
         self.layer_map = layer_map
         self.wanted = layers
         self.names = LayerNames(layer_map)
@@ -43,9 +44,10 @@ class _Layers:
 
     def start(self, present: list[str], header: dict | None) -> None:
         ordered = list(dict.fromkeys([*(header["layers"] if header else []), *present]))
-        self.names = LayerNames(self.layer_map, ordered)
+        self.names = LayerNames(self.layer_map, ordered, where=self.where)
         self.names.check_used(ordered)
-        self.selected = self.names.select(self.wanted, ordered)
+        groups = self.names.groups(ordered)  # --layer takes the map layer's name too
+        self.selected = self.names.select(self.wanted, ordered, groups)
 
     def __call__(self, name: str) -> str | None:
         if self.selected is not None and name.upper() not in self.selected:

@@ -294,7 +294,7 @@ def read(
         raise DriverError(f"dxf chord_m: a distance > 0, not {chord_m!r}") from None
     if chord is not None and not (chord > 0 and np.isfinite(chord)):
         raise DriverError(f"dxf chord_m: a distance > 0, not {chord_m!r}")
-    names = _Layers(layer_map, layers)
+    names = _Layers(layer_map, layers, path)
     opts = {
         "default_code": None if default_code is None else int(default_code),
         "point_code": int(point_code),
@@ -308,7 +308,7 @@ def read(
     got = _fast_read(data, path, names, opts, stats) if fast else None
     if got is None:
         stats.clear()
-        names = _Layers(layer_map, layers)
+        names = _Layers(layer_map, layers, path)
         header, collected = _slow_read(data, path, names, opts, stats, progress)
     else:
         header, collected = got

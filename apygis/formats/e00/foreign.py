@@ -130,9 +130,9 @@ def foreign_to_map(info: dict, tables: list[_Table], mp: MapFile, path, opts: di
         for name, n in (("ARC", len(ids)), ("PAL", max(npoly - 1, 0)), ("LAB", len(lab_ids)))
         if n
     ]
-    names = LayerNames(opts["layer_map"], present)
+    names = LayerNames(opts["layer_map"], present, where=path)
     names.check_used(present)
-    chosen = names.select(opts["layers"], present)
+    chosen = names.select(opts["layers"], present, names.groups(present))
 
     def target(name: str):
         if name not in present or (chosen is not None and name not in chosen):

@@ -240,6 +240,15 @@ def _map_from(info: dict, meta: dict, path, opts: dict) -> MapFile:
     default = layers[0] if layers else DEFAULT_LAYER
     _lines_to_map(info, tables, mp, default, path, opts["tolerance_m"])
     _labels_to_map(info, tables, mp, default, path)
+    if opts["layers"] is not None:  # a map apygis wrote: its source layers are map layers
+        from apygis.formats import select_layers
+
+        select_layers(mp, opts["layers"], path)
+    if opts["layer_map"]:
+        raise DriverError(
+            f"{path}: a map apygis wrote keeps its layers; a layer map applies to coverages "
+            "of other programs"
+        )
     return mp
 
 

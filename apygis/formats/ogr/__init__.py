@@ -383,9 +383,14 @@ def read(
     present = [src.name for src in sources]
     # apygis's own names keep their map layer; the others are named from themselves
     own = [src.name for src in sources if _parse_name(src.name)]
-    names = LayerNames(lmap, [n for n in present if n not in own])
+    names = LayerNames(lmap, [n for n in present if n not in own], where=path)
     names.check_used(present)
-    chosen = names.select(layers, present)
+    groups: dict[str, list[str]] = {}
+    for n in own:
+        parsed = _parse_name(n)
+        if parsed is not None and parsed[2] != "map":
+            groups.setdefault(parsed[1], []).append(n)
+    chosen = names.select(layers, present, groups)
 
     # which map layer and kind each source is
     plan = []
