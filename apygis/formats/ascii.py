@@ -335,6 +335,8 @@ def decode(data: bytes, path=None) -> MapFile:
     if data.startswith(b"\xef\xbb\xbf"):
         rd.pos = 3
     first = rd.next_line()
+    if first is None:
+        raise FormatError(f"the file is empty: not an APY ASCII file (it begins {MAGIC!r})", path)
     if first != MAGIC:
         rd.fail(f"not an APY ASCII file: the first line must be {MAGIC!r}")
     header: dict[str, Any] = {"id": None, "scale": None, "crs": None, "notes": []}

@@ -109,7 +109,14 @@ def convert_file(
         m = apygis.read(src, driver=in_drv.name, **(read_options or {}), **step(0))
         notes = [w.message for w in m.read_warnings]
         if to_crs is not None:
+            from apygis.errors import CRSError
             from apygis.model.reproject import reproject
+
+            if m.crs is None:
+                raise CRSError(
+                    f"{src}: the map has no CRS, so it cannot be reprojected to {to_crs} "
+                    "(assign its CRS with --src-crs)"
+                )
 
             m = reproject(m, to_crs)
         out_drv = get_driver(driver, "w") if driver else driver_for(dst, "w")

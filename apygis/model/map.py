@@ -260,8 +260,8 @@ def _check_table(name: str, t: np.ndarray) -> None:
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
             raise RecordError(
-                f"{what} {t['num'][k]}: {axis.upper()} {t[axis][k]!r} is not finite or exceeds "
-                f"{MAX_COORD:g} in magnitude"
+                f"{what} {t['num'][k]}: {axis.upper()} {float(t[axis][k])!r} is not finite or "
+                f"exceeds {MAX_COORD:g} in magnitude"
             )
     if "code" in names and len(t) and not 0 <= t["code"].min() <= t["code"].max() <= MAX_CODE:
         bad = (t["code"] < 0) | (t["code"] > MAX_CODE)
