@@ -265,7 +265,10 @@ def at_match(block, scheduler, workers, points_per_image, corr_min, terrain_heig
 @at.command("export")
 @click.argument("block", type=_block)
 @click.option(
+    "-o",
+    "--output",
     "--tiepoints",
+    "tiepoints",
     type=_picture,
     required=True,
     metavar="FILE.csv",
