@@ -110,9 +110,9 @@ def _fast_entities(text: str, header: dict, names, opts: dict, stats: Counter):
     for g in inserts:  # layer, block, x, y, z, 5 + 6 per ATTRIB (NUM, CODE, Z), layer
         c = target(g[0])
         if c is not None:
-            pos = _xyz(g[2:5], "INSERT")
-            code = _symbol_code(g[16], g[1], _point_code(pos[2], opts))
-            c.sym.append((_int_or_none(g[10]), *pos, code))
+            pos3 = _xyz(g[2:5], "INSERT")
+            code = _symbol_code(g[16], g[1], _point_code(pos3[2], opts))
+            c.sym.append((_int_or_none(g[10]), *pos3, code))
     for layer_name, x, y, z, _h, raw, xd in texts:
         c = target(layer_name)
         own = _own_text(xd, raw, "TEXT")

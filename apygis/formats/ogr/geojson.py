@@ -114,7 +114,7 @@ def write_geojson(path: Path, name: str, table, crs) -> None:
     member = crs_member(crs) if table.wkb is not None else None
     rfc7946 = table.wkb is not None and member is None
     n = len(table.wkb) if table.wkb is not None else (len(table.data[0]) if table.data else 0)
-    head = {"type": "FeatureCollection", "name": name}
+    head: dict[str, object] = {"type": "FeatureCollection", "name": name}
     if member is not None:
         head["crs"] = member
     text = json.dumps(head, ensure_ascii=False)[:-1]

@@ -62,7 +62,7 @@ def _rgba(rgb, alpha: int = 255) -> str:
     return f"{rgb[0]},{rgb[1]},{rgb[2]},{alpha}"
 
 
-def _props(layer_class: str, props: dict[str, str]) -> str:
+def _props(layer_class: str, props: dict[str, object]) -> str:
     inner = "".join(f"<prop k={quoteattr(k)} v={quoteattr(str(v))}/>" for k, v in props.items())
     return f'<layer class="{layer_class}" enabled="1" locked="0" pass="0">{inner}</layer>'
 
