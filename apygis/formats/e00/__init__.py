@@ -75,8 +75,8 @@ def probe(path) -> bool:
 
 DRIVER = Driver(
     name="e00",
-    description="ARC/INFO interchange file: one line coverage with INFO tables "
-    "(docs/formats/e00.md)",
+    description="ARC/INFO interchange file: writes a line coverage with INFO tables, reads "
+    "line, point and polygon coverages (docs/formats/e00.md)",
     extensions=("e00",),
     reader=read,
     writer=write,
