@@ -22,6 +22,9 @@ if os.environ.get("CI"):
     settings.load_profile("ci")
 
 ROOT = Path(__file__).resolve().parent.parent
+
+# scripts run by the system Python (QGIS, GDAL of the distribution), not by pytest
+collect_ignore = ["formats/qgis_render.py", "formats/gdal_open.py"]
 SAMPLES = ROOT / "samples"
 EXTERNAL = ROOT.parent / "shared" / "external"
 EXTERNAL_WHY = (

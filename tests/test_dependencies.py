@@ -41,7 +41,12 @@ ALLOWED = {
 # Modules of Debian packages that scripts run by the system Python (/usr/bin/python3, not
 # the virtual environment) import; the tests that run them carry a marker and skip with
 # a reason where the package is missing (.ci/run installs it under CI=true).
-SYSTEM = {"tests": {"qgis": "python3-qgis (tests marked qgis)"}}
+SYSTEM = {
+    "tests": {
+        "qgis": "python3-qgis (tests marked qgis)",
+        "osgeo": "python3-gdal (with python3-qgis)",
+    }
+}
 
 
 def _imports(path) -> set[str]:

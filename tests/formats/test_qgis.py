@@ -81,3 +81,45 @@ def test_qgis_opens_the_geopackage_styled_like_the_plot(sample_map, tmp_path):
     assert px["blue"] > 50
     assert px["brown"] > 50
     assert px["dark"] > 200
+
+
+def test_gdal_36_opens_what_apygis_writes_without_warnings(sample_map, tmp_path):
+    """Debian 12's GDAL 3.6 (what QGIS LTR builds run on): the GeoPackage (version 1.2,
+    merged from parts, with layer_styles), RFC 7946 GeoJSON and a DXF with umlauts."""
+    from apygis.model.reproject import reproject
+
+    m = sample_map.copy()
+    m.layer("c").add_text(2684000.0, 1248000.0, 450.0, "Zürich Łódź Ελλάδα Plzeň")
+    gpkg = tmp_path / "ZH1091.gpkg"
+    apygis.write(m, gpkg)
+    plain = tmp_path / "ascii.dxf"  # texts in ASCII: ANSI_1252, nothing to recode
+    apygis.write(sample_map, plain)
+    dxf = tmp_path / "ZH1091.dxf"  # umlauts and more: UTF-8 declared as ANSI_65001
+    apygis.write(m, dxf)
+    gj = tmp_path / "gj"
+    apygis.write(reproject(m, "EPSG:4326"), gj, driver="geojson")
+    areas = next(gj.glob("*_r_areas.geojson"))
+    res = subprocess.run(
+        [
+            "/usr/bin/python3",
+            str(SCRIPT.with_name("gdal_open.py")),
+            *(str(p) for p in (gpkg, plain, dxf, areas)),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 0, res.stderr[-2000:]
+    got = json.loads(res.stdout)
+    assert got["gdal"].startswith("3.")
+    for path in (gpkg, plain, areas):
+        assert got[str(path)]["messages"] == [], path
+    # Debian's iconv has no CP65001: GDAL says so for each string and keeps the UTF-8
+    # text as it is, which is right (the texts below); nothing else is said
+    assert all("Recode from CP65001" in msg for msg in got[str(dxf)]["messages"])
+    layers = got[str(gpkg)]["layers"]
+    assert layers["h_lines"]["crs"] == "2056"
+    assert layers["r_line_points"]["features"] == len(m.layers["r"].line_points)
+    assert "layer_styles" in layers
+    assert "Zürich Łódź Ελλάδα Plzeň" in got[str(dxf)]["texts"]
+    assert got[str(areas)]["layers"][areas.stem]["crs"] in ("4326", "4979")
