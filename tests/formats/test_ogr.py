@@ -546,3 +546,31 @@ def test_foreign_coordinates_beyond_any_ground_are_refused(tmp_path):
     )
     with pytest.raises(FormatError, match="feature 1: coordinates are not finite or exceed"):
         apygis.read(path)
+
+
+@pytest.mark.parametrize(("driver", "ext"), [("GPKG", "gpkg"), ("FlatGeobuf", "fgb")])
+def test_surfaces_are_refused_as_such(tmp_path, driver, ext):
+    """A TIN (what GDAL gives for a multipatch) is refused saying what it is, not with
+    shapely's "ParseException: Unknown WKB type 16"."""
+    import struct
+
+    ring = struct.pack("<I", 4) + b"".join(
+        struct.pack("<3d", *p) for p in [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 0)]
+    )
+    tri = struct.pack("<BII", 1, 1017, 1) + ring
+    tin = struct.pack("<BII", 1, 1016, 1) + tri
+    line = shapely.to_wkb(shapely.LineString([(0, 0, 0), (1, 1, 0)]), flavor="iso")
+    path = tmp_path / f"tin.{ext}"
+    pyogrio.raw.write(
+        path,
+        np.array([line, tin], dtype=object),
+        [np.array([1, 2])],
+        ["id"],
+        driver=driver,
+        geometry_type="Unknown",
+        crs="EPSG:2056",
+    )
+    with pytest.raises(FormatError, match=r"feature 2: a TIN .*surfaces are not supported") as exc:
+        apygis.read(path)
+    assert "ParseException" not in str(exc.value)
+    assert "WKB type" not in str(exc.value)
