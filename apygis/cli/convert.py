@@ -109,7 +109,16 @@ def convert(paths, output, driver, to_crs, jobs, scheduler, overwrite, src):
     if dst == "-":
         _to_stdout(sources, in_drv, out_drv, src, co, common)
         return
-    if len(sources) == 1 and not _is_folder(dst):
+    if len(sources) == 1 and _is_folder(dst):  # into the folder, under SRC's own name
+        from apygis.formats.batch import output_name
+
+        if out_drv is None:
+            if "w" not in in_drv.modes:
+                raise click.UsageError(f"the {in_drv.name} driver cannot write: name one with --to")
+            out_drv = in_drv
+        Path(dst).mkdir(parents=True, exist_ok=True)
+        dst = str(Path(dst) / output_name(sources[0], out_drv.name))
+    if len(sources) == 1:
         from apygis.formats import driver_for
 
         target = out_drv or driver_for(dst, "w")
@@ -128,13 +137,8 @@ def convert(paths, output, driver, to_crs, jobs, scheduler, overwrite, src):
         )
         return
 
-    # a folder: one SRC under its own name, or a batch
-    if out_drv is None:
-        if len(sources) > 1:
-            raise click.UsageError("converting several files into a folder needs --to FORMAT")
-        if "w" not in in_drv.modes:
-            raise click.UsageError(f"the {in_drv.name} driver cannot write: name one with --to")
-        out_drv = in_drv
+    # a batch: several SRC into the folder DST
+    assert out_drv is not None  # checked above: several sources need --to
     common["read_options"] = reader_options(in_drv, src, writer=out_drv)
     common["write_options"] = writer_options(out_drv, co, reader=in_drv)
     failed = []
