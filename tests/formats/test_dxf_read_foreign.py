@@ -89,6 +89,16 @@ def test_four_bulge_closed_r12_polyline_is_a_circle(tmp_path):
     _check_circle(path, 0, 0, R)
 
 
+def test_two_vertex_closed_bulged_r12_polyline_is_a_circle(tmp_path):
+    doc = ezdxf.new("R12")
+    pl = doc.modelspace().add_polyline2d([(5 + R, 7), (5 - R, 7)], close=True)
+    for v in pl.vertices:
+        v.dxf.bulge = 1.0
+    path = tmp_path / "two12.dxf"
+    doc.saveas(path)
+    _check_circle(path, 5, 7, R)
+
+
 def test_four_bulge_closed_lwpolyline_follows_its_arcs(tmp_path):
     """Read as straight segments, the line was up to r - r/sqrt(2) = 2.9 m inside the circle."""
     doc = ezdxf.new()
