@@ -286,13 +286,16 @@ def _write_tables(
     schema of every table already in it, so a map of n layers took O(n²)
     (103 s for 200 layers). Each table goes into a GeoPackage of its own,
     written by GDAL as usual, and :func:`_merge_gpkg` copies them into the
-    first one with SQLite, once. (A part holds up to ``_PART_TABLES`` tables:
-    creating a GeoPackage costs more than reopening a small one.)
+    first one with SQLite, once. A part holds up to ``_PART_TABLES`` tables
+    (creating a GeoPackage costs more than reopening a small one); a map of
+    at most ``_ONE_FILE_TABLES`` tables is written into one file directly
+    (reopening it costs less than copying the data).
     """
     parts: list[Path] = []
     steps = len(tables) + (1 if single is not None else 0)
+    size = len(tables) if len(tables) <= _ONE_FILE_TABLES else _PART_TABLES
     for k, table in enumerate(tables):
-        part = k // _PART_TABLES
+        part = k // size
         name = f".part{part}.gpkg" if single is not None else names[table.name][0]
         dest = tmp / name
         try:
@@ -312,6 +315,7 @@ def _write_tables(
 
 
 _PART_TABLES = 8
+_ONE_FILE_TABLES = 64
 
 _GPKG_ROWS = ("gpkg_contents", "gpkg_geometry_columns", "gpkg_extensions", "gpkg_ogr_contents")
 
