@@ -63,3 +63,56 @@ def test_pens_are_the_plots_default_pens():
     for ext in ("h", "e", "r", "c"):
         pen = pdef.pens[pdef.pen_for(ext, "lines", 1)]
         assert styles.pen_of(ext) == (pen.colour, pen.width_mm), ext
+
+
+def _many_layers(n: int = 20) -> apygis.MapFile:
+    """A map of ``n`` layers with every kind of record: 5 tables each, over 64 in all."""
+    import itertools
+    import string
+
+    m = apygis.MapFile("MANY", scale=5000, crs="EPSG:2056")
+    exts = ("".join(p) for p in itertools.product(string.ascii_lowercase, repeat=2))
+    for k, ext in enumerate(itertools.islice(exts, n)):
+        lay = m.layer(ext)
+        x0 = 2683000.0 + 100 * k
+        lay.add_line(
+            [(x0, 1247000.0, 1.0), (x0 + 10, 1247000.0, 2.0), (x0 + 10, 1247010.0, 3.0)], 5
+        )
+        lay.add_line(
+            [(x0, 1247050.0, 0), (x0 + 5, 1247050.0, 0), (x0 + 5, 1247055.0, 0)], 7, closed=True
+        )
+        lay.add_symbol(x0 + 1, 1247001.0, 400.0, 6)
+        lay.add_text(x0 + 2, 1247002.0, 400.0, f"Text {ext}")
+    return m
+
+
+def test_a_map_of_many_layers_is_merged_into_one_valid_geopackage(tmp_path):
+    import pyogrio
+
+    m = _many_layers()
+    path = tmp_path / "many.gpkg"
+    apygis.write(m, path)
+    assert not list(tmp_path.glob(".part*"))
+    assert not list(tmp_path.glob(".apygis-*"))
+    assert apygis.read(path) == m
+    con = sqlite3.connect(path)
+    assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+    assert con.execute("PRAGMA application_id").fetchone()[0] == 0x47504B47  # 'GPKG'
+    assert con.execute("PRAGMA user_version").fetchone()[0] == 10200
+    tables = {r[0] for r in con.execute("SELECT table_name FROM gpkg_contents")}
+    assert len(tables) == 1 + 5 * 20 + 1  # the header, five per layer, layer_styles
+    counts = dict(con.execute("SELECT table_name, feature_count FROM gpkg_ogr_contents"))
+    assert counts["bt_line_points"] == 6
+    rtrees = {r[0] for r in con.execute("SELECT table_name FROM gpkg_extensions")}
+    assert len(rtrees) == 5 * 20
+    # GDAL sees every layer, and each R-tree answers a spatial filter
+    listed = {str(n) for n, _ in pyogrio.list_layers(path)}
+    assert listed == tables
+    x0 = 2683000.0 + 100 * 7
+    _, _, wkb, _ = pyogrio.raw.read(
+        path, layer="ah_line_points", bbox=(x0 - 1, 1246999, x0 + 11, 1247011)
+    )
+    assert len(wkb) == 3
+    info = pyogrio.read_info(path, layer="ah_symbols")
+    assert info["capabilities"]["fast_spatial_filter"]
+    assert info["layer_metadata"]["DESCRIPTION"].startswith("apygis map MANY, layer ah: symbols")
