@@ -11,8 +11,7 @@ resolution, ``tests.formats.strategies.random_rows``). The script times
   already (built by apygis's own ``_tables`` before the clock starts), into
   one GeoPackage with the same options (version 1.2, R-tree indexes, SQLite's
   per-transaction syncs off as apygis has them): ``pyogrio.write_arrow`` per
-  layer where pyarrow is installed (``pip install -e ".[bench]"``), else
-  ``pyogrio.raw.write``,
+  layer (GDAL's bulk path, which apygis uses too),
 
 and prints both times and their ratio (goal: apygis <= 1.2 x GDAL). Then a
 map of 200 layers (the same 1 M points, 5 000 per layer) to GeoPackage:
@@ -147,7 +146,7 @@ def main() -> None:
     n = sum(len(lay.line_points) for lay in m)
     print(
         f"{n} line points in {args.layers} layers; GDAL writes through "
-        f"{'Arrow' if HAVE_ARROW else 'numpy (pyarrow not installed: pip install .[bench])'}"
+        f"{'Arrow' if HAVE_ARROW else 'numpy (pyarrow missing)'}"
     )
     figures: dict[str, float | None] = {}
     with tempfile.TemporaryDirectory() as tmp:

@@ -102,7 +102,7 @@ def test_a_map_of_many_layers_is_merged_into_one_valid_geopackage(tmp_path):
     tables = {r[0] for r in con.execute("SELECT table_name FROM gpkg_contents")}
     assert len(tables) == 1 + 5 * 20 + 1  # the header, five per layer, layer_styles
     counts = dict(con.execute("SELECT table_name, feature_count FROM gpkg_ogr_contents"))
-    assert counts["bt_line_points"] == 6
+    assert counts["at_line_points"] == 6
     rtrees = {r[0] for r in con.execute("SELECT table_name FROM gpkg_extensions")}
     assert len(rtrees) == 5 * 20
     # GDAL sees every layer, and each R-tree answers a spatial filter

@@ -200,9 +200,45 @@ def _tables(map_: MapFile, fmt: _Format, crs: str | None) -> list[_Table]:
     return out
 
 
+def _arrow(table: _Table):
+    """The table as a pyarrow Table (geometry column ``geom``, WKB), nulls from the masks."""
+    import pyarrow as pa
+
+    cols = {}
+    for name, values, mask in zip(table.fields, table.data, table.masks, strict=True):
+        arr = np.asarray(values)
+        if arr.dtype == object:
+            cols[name] = pa.array(arr.tolist(), type=pa.string(), mask=mask)
+        else:
+            cols[name] = pa.array(arr, mask=None if mask is None else np.asarray(mask))
+    if table.wkb is not None:
+        cols["geom"] = pa.array(table.wkb.tolist(), type=pa.binary())
+    return pa.table(cols)
+
+
 def _write_table(path: Path, fmt: _Format, table: _Table, crs: str | None) -> None:
+    import pyogrio
     import pyogrio.raw
 
+    if fmt.multi:  # GeoPackage: GDAL's bulk (Arrow) path, 1.2x faster than feature by feature
+        _gdal(
+            lambda: pyogrio.write_arrow(
+                _arrow(table),
+                str(path),
+                layer=table.name,
+                driver=fmt.ogr,
+                geometry_name="geom" if table.wkb is not None else None,
+                geometry_type=table.geometry_type,
+                crs=crs if table.geometry_type is not None else None,
+                layer_options=fmt.layer_options or None,
+                dataset_options={"VERSION": fmt.dataset_version or GPKG_VERSION},
+            ),
+            "cannot write",
+            path,
+            table.name,
+            error=_WriteError,
+        )
+        return
     if fmt is _GEOJSON:
         from pyproj import CRS
 
