@@ -1,8 +1,10 @@
 """Writing a map as OGR layers (see :func:`apygis.formats.ogr.write`).
 
 Each OGR layer is a :class:`_Table` of whole columns (WKB and attributes)
-written with one ``pyogrio.raw.write`` call; the header table is cut into rows
-for a Shapefile's DBF. Also the file names of a set, the files a write leaves
+written with one call: ``pyogrio.write_arrow`` into a GeoPackage (GDAL's bulk
+path), ``pyogrio.raw.write`` for Shapefile and FlatGeobuf, apygis's own writer
+for GeoJSON (:mod:`apygis.formats.ogr.geojson`); the header table is cut into
+rows for a Shapefile's DBF. Also the file names of a set, the files a write leaves
 stale, and the GeoPackage's unsynced SQLite while its temporary file is written.
 """
 
