@@ -22,8 +22,9 @@ again each time: O(n²), 103 s).
 DXF: apygis writing the 1 M points as DXF, against GDAL copying that DXF
 (its read included), as before.
 
-Each figure is the best of ``--repeat`` runs (``time.perf_counter``), files
-on the temporary directory's disk.
+The GeoPackage figures are medians of ``--repeat`` (default 3) runs of apygis
+and GDAL alternately, the others the best of ``--repeat`` runs
+(``time.perf_counter``); files on the temporary directory's disk.
 
 Run: ``python benchmarks/bench_convert.py [--repeat N] [--layers N]``
 Last line: one JSON object with the keys ``gpkg_s``, ``gpkg_gdal_s``,
@@ -38,6 +39,7 @@ import json
 import string
 import sys
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
@@ -137,9 +139,24 @@ def gdal_copy(src: Path, dst: Path, driver: str) -> None:
             )
 
 
+def interleaved(a, b, repeat: int) -> tuple[float, float]:
+    """Median times of ``a`` and ``b`` run alternately ``repeat`` times each.
+
+    Alternating, and the median rather than the best, so that a busy machine
+    (other work starting or stopping) weighs on both sides alike.
+    """
+    ta, tb = [], []
+    for _ in range(repeat):
+        for fn, out in ((a, ta), (b, tb)):
+            t0 = time.perf_counter()
+            fn()
+            out.append(time.perf_counter() - t0)
+    return float(np.median(ta)), float(np.median(tb))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--layers", type=int, default=20)
     args = ap.parse_args()
     m = make_map(args.layers)
@@ -162,9 +179,10 @@ def main() -> None:
         tables = _tables(m, _GPKG, crs)
         for t in tables:
             t.arrow = _arrow_table(t) if HAVE_ARROW else None
-        t_apy = best(lambda: apygis.write(m, fresh("apygis.gpkg")), args.repeat)
-        t_gdal = best(
-            lambda: _unsynced(lambda: gdal_write(tables, crs, fresh("gdal.gpkg"))), args.repeat
+        t_apy, t_gdal = interleaved(
+            lambda: apygis.write(m, fresh("apygis.gpkg")),
+            lambda: _unsynced(lambda: gdal_write(tables, crs, fresh("gdal.gpkg"))),
+            args.repeat,
         )
         ratio = t_apy / t_gdal
         figures.update(
