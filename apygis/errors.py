@@ -31,6 +31,7 @@ __all__ = [
     "SymbolLibraryError",
     "TopologyError",
     "ValueRangeError",
+    "ViewError",
     "WriteError",
 ]
 
@@ -173,3 +174,12 @@ class MotorError(InstrumentError):
         self.alarm = alarm
         self.reason = message
         super().__init__(f"{self.port}: {message}" if self.port else message)
+
+
+class ViewError(ApygisError, OSError):
+    """The graphic display (``apygis view``, ``--view``) cannot be served.
+
+    A host that is not an address of this machine, a port in use or not
+    allowed, or the web server's package missing; the message names the
+    address and the cause.
+    """

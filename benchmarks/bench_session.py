@@ -16,7 +16,19 @@ photos with plate motors), a CalComp tablet at 40 counts/mm.
   exchange, character counting and ``ok`` handling are real; no serial
   driver). Percentiles over ``--reports`` reports.
 
-Goal (issue 5): >= 50 k events/s; p99 <= 1 ms.
+* ``view_overhead_pct``: the session of ``session_events_per_s`` with and
+  without the graphic display (``--view``: the view server on its thread,
+  the session observer, one page connected as a WebSocket client in another
+  process), run alternately three times each; the best time of each, in per
+  cent of the run without.
+* ``view_latency_ms_p50`` / ``view_latency_ms_p99``: from the moment the
+  session is handed an ENTER until the page (a WebSocket client in another
+  process, timestamps on the same monotonic clock) has received the delta of
+  that entry; ``--view-entries`` entries, each after ten marks at a tablet's
+  200 reports/s.
+
+Goal (issue 5): >= 50 k events/s; p99 <= 1 ms. Goal (issue 15): the viewer
+costs nothing measurable; entry-to-page latency < 50 ms.
 
 Run: ``python benchmarks/bench_session.py [--events N] [--reports N]``
 Last line: one JSON object with the figures.
@@ -94,10 +106,130 @@ def events(geometry, n: int):
     return out
 
 
+CLIENT = r"""
+import asyncio, json, sys, time
+import aiohttp
+
+async def main(url, want):
+    async with aiohttp.ClientSession() as http:
+        async with http.ws_connect(url, max_msg_size=0) as ws:
+            print("open", flush=True)
+            async for msg in ws:
+                m = json.loads(msg.data)
+                now = time.monotonic()
+                if m["t"] == "delta":
+                    for e in m.get("entries", []):
+                        print("entry", e[0], repr(now), flush=True)
+                    if m.get("ended"):
+                        break
+
+asyncio.run(main(sys.argv[1], int(sys.argv[2])))
+"""
+
+
+class Page:
+    """A page in another process: a WebSocket client printing when each entry arrived."""
+
+    def __init__(self, url: str):
+        import subprocess
+
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", CLIENT, url.replace("http://", "ws://") + "ws", "0"],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        assert self.proc.stdout is not None
+        assert self.proc.stdout.readline().strip() == "open"
+
+    def arrivals(self) -> dict[int, float]:
+        out, _ = self.proc.communicate(timeout=120)
+        got = {}
+        for line in out.splitlines():
+            word, n, t = line.split()
+            if word == "entry":
+                got[int(n)] = float(t)
+        return got
+
+
+def session_run(sample, geometry, evs, view: bool) -> tuple[float, int]:
+    """Seconds for ``evs`` through a Session (journal, motors), with or without the view."""
+    from apygis.view import SessionFeed, ViewServer, session_hub
+
+    tmp = Path(tempfile.mkdtemp())
+    server = page = None
+    try:
+        apygis.write(sample, tmp / "ZH1091")
+        ctl = MotorController(SimPort(SimulatedGrbl()), name="sim")
+        ctl.connect(reset=True)
+        sess = Session(tmp / "ZH1091", geometry, layer="t", motors=ctl)
+        if view:
+            server = ViewServer(session_hub(sess))
+            server.start()
+            sess.subscribe(SessionFeed(server, sess))
+            page = Page(server.url)
+        t0 = time.perf_counter()
+        for ev in evs:
+            sess.handle(ev)
+        dt = time.perf_counter() - t0
+        entries = sess.entries
+        sess.close()
+        return dt, entries
+    finally:
+        if page is not None:
+            page.proc.kill()
+            page.proc.wait()
+        if server is not None:
+            server.stop()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def view_latency(sample, geometry, n_entries: int) -> np.ndarray:
+    """Milliseconds from handing the session an ENTER until the page has the entry."""
+    from apygis.view import SessionFeed, ViewServer, session_hub
+
+    tmp = Path(tempfile.mkdtemp())
+    try:
+        apygis.write(sample, tmp / "ZH1091")
+        sess = Session(tmp / "ZH1091", geometry, layer="t")
+        server = ViewServer(session_hub(sess))
+        server.start()
+        feed = SessionFeed(server, sess)
+        sess.subscribe(feed)
+        page = Page(server.url)
+        for b in ("DESCR", "2", "ENTER", "ENTER", "1", "2", "ENTER"):
+            sess.handle(Press(b))
+        sent: dict[int, float] = {}
+        period = 1.0 / 200.0
+        nxt = time.monotonic()
+        for k in range(n_entries * 10):
+            X = 2_683_300.0 + 1500.0 * k / (n_entries * 10)
+            Y = 1_247_850.0 + 50.0 * math.sin(k / 40.0)
+            nxt += period
+            while time.monotonic() < nxt:
+                time.sleep(max(0.0, nxt - time.monotonic() - 0.0005))
+            sess.handle(Mark(*geometry.tablet(X, Y)))
+            if k % 10 == 9:
+                t = time.monotonic()
+                sess.handle(Press("ENTER"))
+                sent[sess.entries] = t
+        feed.end(sess)
+        got = page.arrivals()
+        sess.close()
+        server.stop()
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    missing = sorted(set(sent) - set(got))
+    if missing:
+        raise SystemExit(f"the page never got entries {missing[:10]}")
+    return np.array([(got[n] - sent[n]) * 1000.0 for n in sorted(sent)])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--events", type=int, default=200_000)
     ap.add_argument("--reports", type=int, default=50_000)
+    ap.add_argument("--view-events", type=int, default=60_000)
+    ap.add_argument("--view-entries", type=int, default=300)
     args = ap.parse_args()
     orientation = load_orientation(ROOT / "samples" / "session" / "ZH1091.orientation.json")
     geometry = OrientedGeometry(orientation)
@@ -165,6 +297,26 @@ def main() -> None:
         f"latency tablet bytes -> motor command over {len(lat)} reports: "
         f"p50 {figures['p50_latency_ms']:.3f} ms, p99 {figures['p99_latency_ms']:.3f} ms, "
         f"max {lat_ms.max():.3f} ms"
+    )
+
+    # the graphic display: what it costs the session, and how soon a page has an entry
+    vevs = events(geometry, args.view_events)
+    best = {False: math.inf, True: math.inf}
+    for _ in range(3):
+        for view in (False, True):
+            dt, n = session_run(sample, geometry, vevs, view)
+            best[view] = min(best[view], dt)
+    figures["view_overhead_pct"] = round(100.0 * (best[True] - best[False]) / best[False], 2)
+    print(
+        f"session with and without the view ({len(vevs)} events, {n} entries, one page): "
+        f"{best[True]:.2f} s vs {best[False]:.2f} s: {figures['view_overhead_pct']:+.2f} %"
+    )
+    lat = view_latency(sample, geometry, args.view_entries)
+    figures["view_latency_ms_p50"] = round(float(np.percentile(lat, 50)), 3)
+    figures["view_latency_ms_p99"] = round(float(np.percentile(lat, 99)), 3)
+    print(
+        f"entry -> page over {len(lat)} entries: p50 {figures['view_latency_ms_p50']:.2f} ms, "
+        f"p99 {figures['view_latency_ms_p99']:.2f} ms, max {lat.max():.2f} ms"
     )
     print(json.dumps(figures))
 

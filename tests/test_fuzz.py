@@ -7,6 +7,11 @@ the APY ones are here, other drivers put theirs in a module
 ``test_every_reader_has_a_seed``.
 Mutations are seeded, so a failure is reproducible from the printed case.
 
+The readers of the block exchange formats (:mod:`apygis.aerotri.exchange`: PAT-B, BLUH,
+COLMAP, OpenDroneMap, MicMac) are fuzzed the same way, one entry per kind of file
+(``tests/aerotri/fuzz_exchange.py``: ``patb-im``, ``colmap-images``, ...); what they read
+is written back with the format's writer.
+
 The corpus ``tests/fuzz_corpus/<driver>/`` holds inputs that once broke a
 reader (nested JSON, counts of 10**12, superscript digits, coordinates of
 1e308, ...) and each driver's seeds: every file there is read by its driver
@@ -38,6 +43,7 @@ import pytest
 import apygis
 from apygis.errors import ApygisError
 from apygis.formats import drivers
+from tests.aerotri.fuzz_exchange import READERS as EXCHANGE
 from tests.formats import strategies
 
 N_CASES = int(os.environ.get("APYGIS_FUZZ_CASES", "1200"))
@@ -62,6 +68,7 @@ SEEDS = {"apy": _seed_apy, "ascii": _seed_ascii}
 for _mod in pkgutil.iter_modules([str(Path(strategies.__file__).parent)]):
     if _mod.name.startswith("fuzzseed_"):
         SEEDS.update(importlib.import_module(f"tests.formats.{_mod.name}").SEEDS)
+SEEDS.update({name: seed for name, (_, seed, _) in EXCHANGE.items()})
 
 
 def _fix_apy_crc(data: bytes) -> bytes:
@@ -126,7 +133,12 @@ def mutate(data: bytes, rng: np.random.Generator) -> bytes:
 
 
 def _readers() -> set[str]:
-    return {name for name, d in drivers().items() if "r" in d.modes}
+    return {name for name, d in drivers().items() if "r" in d.modes} | set(EXCHANGE)
+
+
+def _reader(name: str):
+    """The function that reads one file of the reader ``name`` (a driver or an exchange entry)."""
+    return EXCHANGE[name][0] if name in EXCHANGE else drivers()[name].reader
 
 
 # values that broke readers once (issue 9): overflowing, non-finite, huge, non-ASCII
@@ -221,7 +233,8 @@ def test_corpus_file(driver, path, tmp_path):
 
     A map that was read is written as APY ASCII, which may refuse it (an
     ApygisError) but not crash: a reader must not return strings that cannot
-    be encoded.
+    be encoded. A block an exchange reader returns is written back with its format's
+    writer, likewise.
     """
     assert driver in _readers(), f"{path}: no reader named {driver!r}"
     for f in path.parent.iterdir():  # the file and its companions (GENERATE's CSV)
@@ -230,9 +243,12 @@ def test_corpus_file(driver, path, tmp_path):
     message = None
     try:
         with _time_limit(TIME_LIMIT_S, str(path)), _memory_limit():
-            m = drivers()[driver].reader(str(tmp_path / path.name))
+            m = _reader(driver)(str(tmp_path / path.name))
             # what a reader accepts can be written (no lone surrogates in notes or texts)
-            apygis.write(m, tmp_path / "written" / "back.apa")
+            if driver not in EXCHANGE:
+                apygis.write(m, tmp_path / "written" / "back.apa")
+            elif EXCHANGE[driver][2] is not None:
+                EXCHANGE[driver][2](m, tmp_path / "written")
     except ApygisError as exc:
         message = str(exc)
     if message is not None:  # one line for the CLI, saying something
@@ -277,7 +293,7 @@ def _save_crash(driver: str, fname: str, data: bytes) -> Path | None:
 @pytest.mark.parametrize("name", sorted(SEEDS))
 def test_reader_survives_fuzzing(name, tmp_path):
     seed, fname = SEEDS[name](tmp_path)
-    reader = drivers()[name].reader
+    reader = _reader(name)
     rng = np.random.default_rng(RNG_SEED)
     target = tmp_path / "case" / fname
     target.parent.mkdir()

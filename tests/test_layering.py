@@ -31,10 +31,13 @@ ALLOWED: dict[str, set[str]] = {
     "formats": FLOOR | {"model"},
     "compile": FLOOR | {"model", "orient"},
     "plot": FLOOR | {"model", "formats"},
-    "aerotri": FLOOR | {"orient"},  # aerotriangulation: blocks, imagery, matching, synthetic blocks
+    "aerotri": FLOOR | {"orient", "formats"},  # aerotriangulation; formats: bundle record layouts
     "session": FLOOR | {"model", "orient", "compile", "instrument", "formats"},
+    # the graphic display: draws the model with the plot's pens, shows the engine's effects; the
+    # session does not import it (the view subscribes through Session.subscribe)
+    "view": FLOOR | {"model", "compile", "plot"},
     "cli": FLOOR
-    | {"model", "orient", "compile", "instrument", "formats", "plot", "session", "aerotri"},
+    | {"model", "orient", "compile", "instrument", "formats", "plot", "session", "aerotri", "view"},
     "__init__": FLOOR,  # the public names are imported lazily, by name (PEP 562)
     "__main__": {"cli"},
 }

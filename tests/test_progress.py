@@ -31,6 +31,8 @@ TARGETS = {
     "shp": "out",
     "geojson": "out",
     "fgb": "out",
+    "patb": "M.patb",  # write only: a densification map (tests/formats/test_patb.py)
+    "bluh": "M.bluh",
 }
 
 # public functions with a progress parameter that are not driver readers or writers,
@@ -44,6 +46,11 @@ OTHERS = {
     "apygis.aerotri.project.init_block",
     "apygis.aerotri.pyramid.build_pyramid",
     "apygis.aerotri.match.match_block",
+    "apygis.aerotri.gcp.measure",
+    "apygis.aerotri.adjust.adjust_block",
+    "apygis.aerotri.sketch.sketch_points",
+    "apygis.orient.bundle.adjust",
+    "apygis.orient.bundle.robust_adjust",
 }
 # called by the gpkg, shp, geojson and fgb drivers' readers and writers (closures)
 OTHERS |= {"apygis.formats.ogr.read", "apygis.formats.ogr.write"}
@@ -133,6 +140,12 @@ def test_every_progress_function_documents_the_signature():
 def test_driver_progress(name, sample_map, tmp_path):
     target = tmp_path / TARGETS[name]
     rec = Recorder()
+    if "r" not in get_driver(name).modes:  # the bundle file drivers take a densification map
+        from tests.formats.test_patb import densification_map
+
+        apygis.write(densification_map(), target, driver=name, progress=rec)
+        check_calls(rec.calls, f"{name} write")
+        return
     apygis.write(sample_map, target, driver=name, progress=rec)
     check_calls(rec.calls, f"{name} write")
     rec = Recorder()
@@ -199,10 +212,13 @@ def test_the_protocol_and_helpers():
 
 def test_aerotri_progress(tmp_path):
     """A two-image synthetic block through synth, init, a pyramid and match."""
+    from apygis.aerotri.adjust import adjust_block
     from apygis.aerotri.block import Block
+    from apygis.aerotri.gcp import measure, read_measurements
     from apygis.aerotri.match import MatchOptions, match_block
     from apygis.aerotri.project import init_block
     from apygis.aerotri.pyramid import build_pyramid
+    from apygis.aerotri.sketch import sketch_points
     from apygis.aerotri.synth import SynthSpec, synth_block
 
     folder = tmp_path / "b"
@@ -227,5 +243,25 @@ def test_aerotri_progress(tmp_path):
     rec = Recorder()
     with Block.open(tmp_path / "b.block") as b:
         match_block(b, MatchOptions(scheduler="sync"), progress=rec)
-    check_calls(rec.calls, "match_block")
-    assert rec.calls[-1] == (STEPS, STEPS)
+        check_calls(rec.calls, "match_block")
+        assert rec.calls[-1] == (STEPS, STEPS)
+        rec = Recorder()
+        measure(b, read_measurements(folder / "gcp.csv"), progress=rec)
+        check_calls(rec.calls, "gcp.measure")
+        rec = Recorder()
+        adjust_block(b, progress=rec)
+        check_calls(rec.calls, "adjust_block")
+        rec = Recorder()
+        sketch_points(b, tmp_path / "s.pdf", progress=rec)
+        check_calls(rec.calls, "sketch_points")
+
+
+def test_bundle_progress():
+    from apygis.aerotri.simulate import simulate_block
+    from apygis.orient.bundle import adjust, robust_adjust
+
+    pb = simulate_block(2, 4, points_per_image=80, seed=2).problem
+    for f in (adjust, robust_adjust):
+        rec = Recorder()
+        f(pb, progress=rec)
+        check_calls(rec.calls, f.__name__)

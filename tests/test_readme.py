@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from tests.conftest import ROOT
 
 
@@ -82,17 +84,84 @@ def test_readme_main_job_runs_and_writes_only_under_out(tmp_path):
     assert (root / "out" / "ZH1091-margin.apa").is_file()
 
 
+def _serves(command: str) -> bool:
+    """A command that serves the graphic display until Ctrl-C (not run as a plain command)."""
+    return command.startswith("apygis view ") or " --view" in command
+
+
+def _run_served(command: str, cwd: Path) -> None:
+    """Run a README command that serves a page as a user would: it prints its URL, the page
+    loads with the token and is refused without it, a page connects (so a ``--view-wait``
+    ends), a session ends, and Ctrl-C stops it with exit status 0."""
+    import json
+    import signal
+    import urllib.error
+    import urllib.request
+
+    from tests.view.wsclient import WsClient
+
+    exe = Path(sys.executable).with_name("apygis")
+    prefix = [str(exe)] if exe.exists() else [sys.executable, "-m", "apygis"]
+    env = {**os.environ, "HOME": str(cwd / "home"), "DISPLAY": "", "WAYLAND_DISPLAY": ""}
+    env["APYGIS_SYMBOLS"] = str(cwd / "out" / "s.apysym")
+    proc = subprocess.Popen(
+        prefix + shlex.split(command)[1:], cwd=cwd, env=env, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    lines: list[str] = []
+    client = None
+    try:
+        assert proc.stdout is not None
+        url = None
+        while url is None:
+            line = proc.stdout.readline()
+            assert line, f"{command}: ended without a URL\n{''.join(lines)}\n{proc.stderr.read()}"
+            lines.append(line)
+            m = re.search(r"(http://127\.0\.0\.1:\d+/\S+/)", line)
+            url = m.group(1) if m else None
+        with urllib.request.urlopen(url, timeout=10) as r:
+            assert r.status == 200
+        with urllib.request.urlopen(url + "state.json", timeout=10) as r:
+            assert json.loads(r.read())["t"] == "state"
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(url.rsplit("/", 2)[0] + "/", timeout=10)
+        assert refused.value.code == 403
+        client = WsClient(url)
+        if command.startswith("apygis session "):
+            while "session ended" not in lines[-1]:
+                line = proc.stdout.readline()
+                assert line, f"{command}\n{''.join(lines)}\n{proc.stderr.read()}"
+                lines.append(line)
+            client.wait(lambda m: m.ended and len(m.entries) > 20, timeout=30)
+        else:
+            client.wait(lambda m: m.seq >= 0)
+    finally:
+        if client is not None:
+            client.close()
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, f"{command}\n{''.join(lines)}{out}\n{err}"
+    assert "Traceback" not in err, f"{command}\n{err}"
+
+
 def test_readme_command_line_examples_run_and_write_only_under_out(tmp_path):
     """Every command of the README's command-line section runs (all but the one that
-    needs a real tablet and motors) and writes nothing outside ``out/``."""
+    needs a real tablet and motors) and writes nothing outside ``out/``; the commands that
+    serve the graphic display are run as servers (loaded, then stopped with Ctrl-C)."""
     text = (ROOT / "README.md").read_text()
     block = next(b for b in _sh_blocks(text) if "apygis formats" in b)
     commands = [c for c in _apygis_commands(block) if "/dev/tty" not in c]
-    assert len(commands) >= 10
+    served = [c for c in commands if _serves(c)]
+    assert len(commands) - len(served) >= 10
+    assert any(c.startswith("apygis view ") for c in served)
+    assert any(c.startswith("apygis session ") for c in served)
     root = _sandbox(tmp_path)
     (root / "home").mkdir()
     before = _files(root)
-    _run_readme_commands(commands, root)
+    _run_readme_commands([c for c in commands if not _serves(c)], root)
+    for command in served:
+        _run_served(command, root)
     new = {p for p in _files(root) - before if p.parts[0] != "home"}
     assert new
     assert all(p.parts[0] == "out" for p in new), sorted(map(str, new))
@@ -105,11 +174,12 @@ def test_readme_aerotriangulation_demo_runs_and_writes_only_under_out(tmp_path):
     block = next(b for b in _sh_blocks(text) if b.startswith("apygis at synth out/"))
     (line,) = [ln for ln in block.splitlines() if ln.strip()]
     commands = [c.strip() for c in line.split("&&")]
-    assert [c.split()[:2] for c in commands] == [
-        ["apygis", "at"],
-        ["apygis", "at"],
-        ["apygis", "at"],
-        ["apygis", "at"],
+    assert [c.split()[:3] for c in commands] == [
+        ["apygis", "at", "synth"],
+        ["apygis", "at", "init"],
+        ["apygis", "at", "match"],
+        ["apygis", "at", "gcp"],
+        ["apygis", "at", "adjust"],
     ]
     root = _sandbox(tmp_path)
     (root / "home").mkdir()
@@ -119,3 +189,4 @@ def test_readme_aerotriangulation_demo_runs_and_writes_only_under_out(tmp_path):
     assert all(p.parts[0] == "out" for p in new), sorted(map(str, new))
     assert (root / "out" / "at-demo.png").is_file()
     assert (root / "out" / "at-demo.block").is_file()
+    assert (root / "out" / "at-demo-adjust.png").is_file()

@@ -35,7 +35,7 @@ from apygis.errors import ApygisError, FileOverwriteError
 
 __all__ = ["SCHEMA_VERSION", "Block", "BlockError", "ImageRecord"]
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 
 class BlockError(ApygisError, ValueError):
@@ -93,6 +93,27 @@ MIGRATIONS: dict[int, str] = {
     # 2: the azimuth of each image's photo x axis, found by matching when a camera is
     # yawed against the flight (drones); NULL: along the flight
     1: "ALTER TABLE images ADD COLUMN x_azimuth_deg REAL;",
+    # 3: the bundle adjustment's results (apygis at adjust): each run, the exterior
+    # orientations, the adjusted points and every observation's residual and verdict
+    2: """
+CREATE TABLE adjustments (
+    id INTEGER PRIMARY KEY, started TEXT NOT NULL, finished TEXT, options TEXT NOT NULL,
+    report TEXT);
+CREATE TABLE exterior (
+    image INTEGER PRIMARY KEY REFERENCES images(image), adjustment INTEGER NOT NULL,
+    X REAL NOT NULL, Y REAL NOT NULL, Z REAL NOT NULL,
+    omega REAL NOT NULL, phi REAL NOT NULL, kappa REAL NOT NULL,
+    sX REAL, sY REAL, sZ REAL, somega REAL, sphi REAL, skappa REAL);
+CREATE TABLE adjusted_points (
+    point INTEGER PRIMARY KEY REFERENCES points(id) ON DELETE CASCADE,
+    adjustment INTEGER NOT NULL, X REAL NOT NULL, Y REAL NOT NULL, Z REAL NOT NULL,
+    sX REAL, sY REAL, sZ REAL, rXY REAL, rays INTEGER NOT NULL);
+CREATE TABLE residuals (
+    point INTEGER NOT NULL, image INTEGER NOT NULL, adjustment INTEGER NOT NULL,
+    vx_px REAL, vy_px REAL, w REAL, rejected INTEGER NOT NULL DEFAULT 0,
+    reason TEXT NOT NULL DEFAULT '', PRIMARY KEY (point, image),
+    FOREIGN KEY (point, image) REFERENCES observations(point, image) ON DELETE CASCADE);
+""",
 }
 
 POINT_KINDS = ("tie", "new", "full", "planimetric", "height", "check")

@@ -374,4 +374,4 @@ def block_display(
 
     buf = io.BytesIO()
     fig.savefig(buf, format=fmt, dpi=dpi)
-    return atomic_write(path, buf.getvalue())
+    return atomic_write(path, buf.getvalue(), parents=True)

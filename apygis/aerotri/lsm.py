@@ -641,7 +641,7 @@ def track(
     start: int,
     half: int = 7,
     corr_min: float = 0.75,
-    tile: int = 1024,
+    tile: int = 4096,
     max_iter: int = 15,
     tol_px: float = 0.002,
     sigma_max: float = 0.5,
@@ -661,7 +661,8 @@ def track(
     the tile size). A point that fails at any level stops there and is reported
     not ok with that level's reason (its ``xy`` mapped to level 0). The other
     keywords are :func:`lsm`'s, at every level (``sigma_max`` in that level's
-    pixels; ``affine_max`` against the previous level's ``A``). Returns the
+    pixels; ``affine_max`` against the previous level's ``A``; ``tol_px`` at
+    full resolution, :data:`COARSE_TOL_PX` above it). Returns the
     :class:`LsmResult` at level 0 (``iterations`` summed over levels).
     """
     ref_xy0 = np.asarray(ref_xy0, dtype=float).reshape(-1, 2)
@@ -700,7 +701,8 @@ def track(
             order = np.argsort(inv, kind="stable")
             splits = np.flatnonzero(np.diff(inv[order])) + 1
             for grp in np.split(idx_all[order], splits):
-                r = _track_group(ref, search, level, rxy[grp], xy[grp], A[grp], half, opts)
+                lv_opts = opts if level == 0 else {**opts, "tol_px": max(tol_px, COARSE_TOL_PX)}
+                r = _track_group(ref, search, level, rxy[grp], xy[grp], A[grp], half, lv_opts)
                 res.put(grp, r)
         total_iter += res.iterations
         failed = alive & ~res.ok
@@ -720,6 +722,14 @@ def _subset(r: LsmResult, sel) -> LsmResult:
     return LsmResult(**{k: getattr(r, k)[sel] for k in r.__dataclass_fields__})
 
 
+#: Pixels between a patch's samples and its neighbours in the atlas (spline prefilter reach).
+ATLAS_MARGIN = 8
+
+#: Convergence tolerance (pixels of the level) above full resolution: a coarse level only
+#: seeds the next, whose convergence radius (2 px) is far larger than twice this.
+COARSE_TOL_PX = 0.05
+
+
 def _atlas(window: np.ndarray, c0: int, r0: int, xy: np.ndarray, m: int):
     """The patches of ``window`` (origin ``c0, r0``) around the points ``xy``, side by side.
 
@@ -728,8 +738,9 @@ def _atlas(window: np.ndarray, c0: int, r0: int, xy: np.ndarray, m: int):
     computed at once, so the prefilter's cost grows with the number of points,
     not with the area the points are spread over. The prefilter runs across
     neighbouring patches, but its influence decays by 0.268 per pixel and every
-    sample lies at least ``m - (half + reach)`` >= 12 pixels inside its own patch
-    (relative error < 2e-7). Returns the :class:`SplineImage` and, per point,
+    sample lies at least ``m - (half + reach)`` >= :data:`ATLAS_MARGIN` pixels
+    inside its own patch (relative error 0.268^8 < 3e-5: below 0.01 DN of an
+    8-bit image). Returns the :class:`SplineImage` and, per point,
     the integer offset (n x 2) from window-level pixel coordinates to atlas
     coordinates (sub-pixel fractions are kept).
     """
@@ -775,7 +786,7 @@ def _track_group(ref, search, level, rxy, sxy, A, half, opts) -> LsmResult:
     if not in_ref.any():
         return res
     rxy, sxy, A = rxy[in_ref], sxy[in_ref], A[in_ref]
-    mref = half + 12  # spline prefilter edge effect: 0.268^10 ~ 2e-6
+    mref = half + ATLAS_MARGIN
     c0 = int(np.floor(rxy[:, 0].min())) - mref
     r0 = int(np.floor(rxy[:, 1].min())) - mref
     c1 = int(np.ceil(rxy[:, 0].max())) + mref
@@ -783,7 +794,7 @@ def _track_group(ref, search, level, rxy, sxy, A, half, opts) -> LsmResult:
     win_r = ref.read(level, c0, r0, c1 - c0 + 1, r1 - r0 + 1)
     spline_r, off_r = _atlas(win_r, c0, r0, rxy, mref)
     reach = float(np.abs(A).sum(axis=2).max()) * half
-    ms = int(np.ceil(reach + half + 12))
+    ms = int(np.ceil(reach + half + ATLAS_MARGIN))
     c0 = int(np.floor(sxy[:, 0].min())) - ms
     r0 = int(np.floor(sxy[:, 1].min())) - ms
     c1 = int(np.ceil(sxy[:, 0].max())) + ms

@@ -46,7 +46,7 @@ def export_tiepoints(block: Block, path) -> int:
             [name, image, f"{x:.4f}", f"{y:.4f}", f"{xm:.5f}", f"{ym:.5f}",
              "" if s is None else f"{s:.4f}"]
         )  # fmt: skip
-    atomic_write(Path(path), buf.getvalue())
+    atomic_write(Path(path), buf.getvalue(), parents=True)
     return len(rows)
 
 

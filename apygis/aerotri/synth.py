@@ -874,13 +874,17 @@ def _build_truth(spec: SynthSpec) -> Truth:
     if len(inner) < 2:  # small blocks: edge points that are no corner become checks
         inner += [c for c in full if not c[3]][: 2 - len(inner)]
         full = [c for c in full if c not in inner]
+    # the control's sigmas include the identification of the point in the images: a fifth
+    # (plan) and a third (height) of the ground pixel, at least 3 and 5 cm
+    sxy = round(max(0.03, 0.2 * spec.gsd), 3)
+    sz = round(max(0.05, 0.3 * spec.gsd), 3)
     for k, (x, y, *_) in enumerate(full[:10] + inner[:4]):
         X, Y = e0 + x, n0 + y
         Z = float(ztab.eval(np.array([X]), np.array([Y]))[0][0])
         kind = "full" if k < len(full[:10]) else "check"
         control.append(
-            {"name": f"C{k + 1:02d}", "X": X, "Y": Y, "Z": Z, "sigma_xy_m": 0.03,
-             "sigma_z_m": 0.05, "kind": kind}
+            {"name": f"C{k + 1:02d}", "X": X, "Y": Y, "Z": Z, "sigma_xy_m": sxy,
+             "sigma_z_m": sz, "kind": kind}
         )  # fmt: skip
     return Truth(spec, camera, images, strip, heading, ext, scan, scan0, codes, size, dem,
                  control, lake, roads)  # fmt: skip
@@ -893,7 +897,9 @@ def synth_block(
 
     Files: ``img_<n>.tif`` (8-bit grey, tiled 256 x 256, no georeferencing),
     ``camera.toml``, ``images.csv`` (approximate centres = truth + Gaussian noise of
-    ``spec.approx_error``), ``control.csv``, ``dem.tif`` and ``truth.json``.
+    ``spec.approx_error``), ``control.csv``, ``gcp.csv`` (a simulated operator's
+    measurements of the control points, :func:`_operator_measurements`), ``dem.tif`` and
+    ``truth.json``.
     ``progress(done, total)`` counts rendered images.
     """
     import rasterio
@@ -945,6 +951,7 @@ def synth_block(
             f"{c['sigma_z_m']},{c['kind']}"
         )
     (out / "control.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    (out / "gcp.csv").write_text(_operator_measurements(truth, rng), encoding="utf-8")
     doc = {
         "format": "apygis synthetic block truth",
         "version": 1,
@@ -980,6 +987,38 @@ def synth_block(
     path = out / "truth.json"
     path.write_text(json.dumps(doc, indent=1), encoding="utf-8")
     return path
+
+
+#: The simulated operator of ``gcp.csv``: pointing error (px) of a precise and of an
+#: approximate measurement, and the margin (px) a point must keep from the image's edge.
+OPERATOR_PRECISE_PX = 0.15
+OPERATOR_APPROX_PX = 3.0
+OPERATOR_MARGIN_PX = 40
+
+
+def _operator_measurements(truth: Truth, rng) -> str:
+    """``gcp.csv`` (the input of ``apygis at gcp --measure``): a simulated operator's
+    measurements of every control and check point, digitised precisely (pointing error
+    :data:`OPERATOR_PRECISE_PX`) in the image where the point lies nearest the centre and
+    approximately (:data:`OPERATOR_APPROX_PX`) in the others that see it."""
+    lines = ["point,image,x_px,y_px,mode"]
+    for c in truth.control:
+        XYZ = np.array([[c["X"], c["Y"], c["Z"]]])
+        seen = []
+        for n in truth.images:
+            w, h = truth.size[n]
+            px = truth.project(n, XYZ)[0]
+            m = OPERATOR_MARGIN_PX
+            if m <= px[0] <= w - 1 - m and m <= px[1] <= h - 1 - m:
+                seen.append((float(np.hypot(px[0] / w - 0.5, px[1] / h - 0.5)), n, px))
+        if len(seen) < 2:
+            continue
+        seen.sort(key=lambda t: t[0])
+        for k, (_, n, px) in enumerate(seen):
+            sd = OPERATOR_PRECISE_PX if k == 0 else OPERATOR_APPROX_PX
+            x, y = px + rng.normal(0.0, sd, 2)
+            lines.append(f"{c['name']},{n},{x:.2f},{y:.2f},{'precise' if k == 0 else 'approx'}")
+    return "\n".join(lines) + "\n"
 
 
 def load_truth(path) -> Truth:

@@ -67,6 +67,7 @@ def convert(paths, output, driver, to_crs, jobs, scheduler, overwrite, src):
       apygis convert --to gpkg -j 2 'samples/*.apa' -o out/batch/
       apygis convert drawing.dxf -o out/ --src-crs EPSG:2056 --layer-map ROADS=r
       apygis convert samples/ZH1091 --to dxf -o - > out/sheet.dxf
+      apygis convert densification/MAP -o out/block.patb --to patb
 
     DST names a file, written with --to/--driver or the driver its extension
     names; a DST ending in '/' (or an existing folder) is a folder that

@@ -22,6 +22,7 @@ from pathlib import Path
 import click
 
 from apygis.cli._common import run_guarded
+from apygis.cli.view import host_options, serve_until_interrupted, start_view, view_server
 from apygis.errors import FileOverwriteError, MeasurementError
 from apygis.orient.io import Orientation, load_orientation, save_orientation
 from apygis.orient.photo import orient_photo
@@ -109,9 +110,63 @@ def orient() -> None:
     is_flag=True,
     help="Update an existing output file: replace the part computed here.",
 )
+@click.option(
+    "--view",
+    "view_page",
+    is_flag=True,
+    help="Show the control points and their residual vectors on a local web page "
+    "(served until Ctrl-C).",
+)
+@click.option(
+    "--map",
+    "map_path",
+    type=_in_file,
+    default=None,
+    help="With --view: the existing map data to show under the control points.",
+)
+@host_options("view-")
 @run_guarded
-def orient_map(control, measurements, model, reject, map_id, output, overwrite):
-    """Orient the map from CONTROL (ID X Y Z) and tablet MEASUREMENTS (ID x_mm y_mm)."""
+def orient_map(
+    control, measurements, model, reject, map_id, output, overwrite, view_page, map_path,
+    view_host, view_port, no_browser,
+):  # fmt: skip
+    """Orient the map from CONTROL (ID X Y Z) and tablet MEASUREMENTS (ID x_mm y_mm).
+
+    With --view the control points, their residual vectors (exaggerated, the
+    factor in the legend) and, with --map, the existing map are shown on a
+    local web page until Ctrl-C.
+    """
+    if map_path is not None and not view_page:
+        raise click.UsageError("--map goes with --view")
+    server = view_server(view_host, view_port) if view_page else None
+    try:
+        fit = _orient_map(control, measurements, model, reject, map_id, output, overwrite)
+        if server is not None:
+            _show_fit(server, fit, control, map_path, map_id, no_browser)
+    except BaseException:
+        if server is not None:
+            server.stop()
+        raise
+    if server is not None:
+        serve_until_interrupted(server)
+
+
+def _show_fit(server, fit, control, map_path, map_id, no_browser) -> None:
+    import apygis
+    from apygis.model.map import MapFile
+    from apygis.view import control_overlays, map_hub
+
+    m = apygis.read(map_path) if map_path is not None else MapFile(map_id or "orientation")
+    ctrl = read_control(control)
+    hub = map_hub(m, kind="orientation", source=str(map_path or control))
+    rejected = {pid: ctrl[pid][:2] for pid in fit.rejected if pid in ctrl}
+    hub.set_overlays(control_overlays(fit.ids, fit.ground, fit.residuals, rejected))
+    what = f"the map orientation ({len(fit.ids)} control points"
+    what += f", map {m.id})" if map_path is not None else ")"
+    start_view(server, hub, what, no_browser)
+
+
+def _orient_map(control, measurements, model, reject, map_id, output, overwrite):
     existing = _existing(output, overwrite)  # a bad output path fails before any work
     ctrl = read_control(control)
     ids, tablet = read_map_measurements(measurements)
@@ -160,6 +215,7 @@ def orient_map(control, measurements, model, reject, map_id, output, overwrite):
             quality=quality,
         )
         _save(o, output)
+    return fit
 
 
 @orient.command("photos")

@@ -7,6 +7,7 @@ from typing import cast
 import click
 
 from apygis.cli._common import run_guarded
+from apygis.cli.view import host_options
 
 
 def _copy_map(src_base, out, overwrite: bool):
@@ -97,10 +98,31 @@ def _tablet_spec(tablet: str) -> tuple[str, str]:
     "--pad", type=click.Path(dir_okay=False), help="Button pad file (docs/button-pad.md)."
 )
 @click.option("--realtime", is_flag=True, help="Replay at the recorded pace.")
+@click.option(
+    "--view",
+    "view_page",
+    is_flag=True,
+    help="Show the compilation live on a local web page (the graphic display); the page "
+    "stays up after the session until Ctrl-C.",
+)
+@click.option(
+    "--view-wait",
+    type=click.FloatRange(0, 3600),
+    default=0.0,
+    help="With --view: wait up to this many seconds for a page to open before the input "
+    "starts (a replay shown from its first entry).",
+)
+@click.option(
+    "--plotter",
+    type=click.Path(dir_okay=False),
+    help="With --view: PLOTTER.DEF whose pens draw the page.",
+)
+@host_options("view-")
 @run_guarded
 def session(
     map_path, orientation, layer, tablet, motors, replay, record, output, overwrite,
-    recover_only, discard_journal, trust_journal, library, pad, realtime,
+    recover_only, discard_journal, trust_journal, library, pad, realtime, view_page, view_wait,
+    plotter, view_host, view_port, no_browser,
 ):  # fmt: skip
     """Run a revision session on MAP (dir/ID), or replay a recorded one.
 
@@ -120,6 +142,12 @@ def session(
     One session at a time per map: a session holds the lock MAP.lock and a
     second one is refused. Everything (orientation, pad, tablet, recording,
     ports) is checked before any file is written.
+
+    With --view the graphic display is served on a local web page (URL
+    printed, token included): records appear as they are entered, the
+    floating mark moves, the status line, the PROCEED menu's display scale
+    factor and crosshair scale, AREA and DHI results are shown. The session
+    never waits for the page.
     """
     import contextlib
     from pathlib import Path
@@ -178,6 +206,14 @@ def session(
     source = Path(map_path)
     base = Path(output) / source.name if output else source
     made_dir = not base.parent.exists()
+    server = pdef = None
+    if view_page:
+        from apygis.cli.view import plotter_and_library, view_server
+
+        pdef, _ = plotter_and_library(plotter, None)
+        server = view_server(view_host, view_port)  # the address is taken before any file
+    elif plotter or view_wait:
+        raise click.UsageError("--plotter and --view-wait go with --view")
 
     # 2. the map's lock, then the instruments, then the files
     lock = SessionLock.acquire(base)
@@ -205,13 +241,18 @@ def session(
             if thing is not None:
                 with contextlib.suppress(Exception):
                     thing.close()
+        if server is not None:
+            server.stop()
         lock.release()
         if made_dir:
             with contextlib.suppress(OSError):
                 base.parent.rmdir()  # only if empty: nothing was written
         raise
 
-    # 3. the session
+    # 3. the display, then the session
+    feed = None
+    if server is not None:
+        feed = _start_view(sess, server, pdef, lib, no_browser, view_wait)
     try:
         if not recover_only and not sess.finished:
             if replay:
@@ -223,6 +264,8 @@ def session(
     except BaseException:
         with contextlib.suppress(ApygisError):  # it has told the operator what it could not save
             sess.close()
+        if server is not None:
+            server.stop()
         raise
     finally:
         if ctl is not None:
@@ -237,7 +280,40 @@ def session(
                 f"tablet: {stats['packets']} reports, {stats['discarded_bytes']} bytes discarded, "
                 f"{stats['resyncs']} resyncs",
             )
-    sess.close()  # input ended without terminating: save, keep the journal
+    try:
+        sess.close()  # input ended without terminating: save, keep the journal
+    except BaseException:
+        if server is not None:
+            server.stop()
+        raise
+    if server is not None and feed is not None:
+        from apygis.cli.view import serve_until_interrupted
+
+        feed.end(sess)
+        serve_until_interrupted(
+            server, f"session ended; the view stays at {server.url} until Ctrl-C"
+        )
+
+
+def _start_view(sess, server, pdef, lib, no_browser: bool, wait: float):
+    """Serve the session's page and subscribe it to the session; returns the feed."""
+    from apygis.cli.view import start_view
+    from apygis.view import SessionFeed, session_hub
+
+    try:
+        hub = session_hub(sess, plotdef=pdef, library=lib)
+        start_view(server, hub, f"session on {sess.map.id}", no_browser)
+        feed = SessionFeed(server, sess)
+        sess.subscribe(feed)
+    except BaseException:
+        server.stop()
+        sess.close()
+        raise
+    if wait > 0:
+        click.echo(f"waiting up to {wait:g} s for the page to open")
+        if not server.wait_for_viewer(wait):
+            click.echo("no page opened; going on")
+    return feed
 
 
 def _open_tablet(url):

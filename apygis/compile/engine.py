@@ -67,7 +67,9 @@ the floating mark is seen (map or model).
 
 The PROCEED menu's items 1 and 3 set the display scale factor (0.25-25) and
 the crosshair scale (0.25-4): the engine keeps them and tells the display
-with :class:`DisplayScale` / :class:`CrosshairScale` effects.
+with :class:`DisplayScale` / :class:`CrosshairScale` effects. AREA and DHI
+results go to the monitor as a :class:`Message` and to the display as
+:class:`AreaShown` / :class:`DhiShown` (what to draw over the map).
 """
 
 from __future__ import annotations
@@ -85,8 +87,10 @@ from apygis.compile.events import (
     DISPLAY_SCALE_RANGE,
     RECORD_EFFECTS,
     Added,
+    AreaShown,
     CrosshairScale,
     Deleted,
+    DhiShown,
     DisplayScale,
     Effect,
     Event,
@@ -117,8 +121,10 @@ __all__ = [
     "MODE_STATE",
     "RECORD_EFFECTS",
     "Added",
+    "AreaShown",
     "CrosshairScale",
     "Deleted",
+    "DhiShown",
     "DisplayScale",
     "Effect",
     "Engine",
@@ -901,6 +907,14 @@ class Engine:
                     f"{r.perimeter_m:.2f} m, {len(r.points)} points, walked {sense}"
                 )
             )
+            lp = self.layer.line_points
+            rows = [int(np.flatnonzero(lp["num"] == n)[0]) for n in r.points]
+            ring = tuple((float(lp["x"][i]), float(lp["y"][i])) for i in rows)
+            out.append(
+                AreaShown(
+                    self.layer_ext, tuple(r.points), ring, r.area_m2, r.perimeter_m, r.clockwise
+                )
+            )
         elif not self._proceed_to_menu(b, out):
             self._ignored(b, out)
 
@@ -913,7 +927,8 @@ class Engine:
                 pick.first = self.mark()
                 out.append(Message("DHI: second point, ENTER"))
                 return
-            d = self.layer.dhi(pick.first, self.mark())
+            a, b2 = pick.first, self._marked()
+            d = self.layer.dhi(a, b2)
             pick.first = None
             pct = "vertical" if d.inclination_pct is None else f"{d.inclination_pct:.2f} %"
             out.append(
@@ -922,6 +937,7 @@ class Engine:
                     f"inclination {d.inclination_deg:+.3f} deg ({pct})"
                 )
             )
+            out.append(DhiShown(a, b2, d.distance_m, d.dz_m, d.inclination_deg))
         elif not self._proceed_to_menu(b, out):
             self._ignored(b, out)
 

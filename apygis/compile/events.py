@@ -15,7 +15,8 @@ Effects
     For the operator: :class:`Message`, :class:`Ignored` (a button that does
     nothing in the present mode), :class:`Status`.
     For the instrument: :class:`Plates`, :class:`ZeroPlates`.
-    For the display: :class:`DisplayScale`, :class:`CrosshairScale`.
+    For the display: :class:`DisplayScale`, :class:`CrosshairScale`,
+    :class:`AreaShown`, :class:`DhiShown` (results to draw over the map).
     For the session: :class:`Save`, :class:`Terminate`.
 
 >>> event_from_dict(event_to_dict(Mark(1.5, -2.0)))
@@ -38,8 +39,10 @@ __all__ = [
     "DISPLAY_SCALE_RANGE",
     "RECORD_EFFECTS",
     "Added",
+    "AreaShown",
     "CrosshairScale",
     "Deleted",
+    "DhiShown",
     "DisplayScale",
     "Effect",
     "Event",
@@ -243,6 +246,39 @@ class CrosshairScale:
 
 
 @dataclass(frozen=True)
+class AreaShown:
+    """AREA measured a closed line: for a display to draw (with the monitor's Message).
+
+    ``points`` are the ring's line point numbers in the walking direction,
+    ``ring`` their ground positions (X, Y) in metres, in the same order;
+    ``area_m2`` the planimetric area, ``perimeter_m`` the ring's length,
+    ``clockwise`` whether the operator walked it clockwise.
+    """
+
+    layer: str
+    points: tuple[int, ...]
+    ring: tuple[tuple[float, float], ...]
+    area_m2: float
+    perimeter_m: float
+    clockwise: bool
+
+
+@dataclass(frozen=True)
+class DhiShown:
+    """DHI measured from ``a`` to ``b`` (ground X, Y, Z in metres): for a display to draw.
+
+    ``distance_m`` is horizontal, ``dz_m`` is ``Z_b - Z_a``, ``inclination_deg``
+    is ``atan2(dz, distance)``.
+    """
+
+    a: tuple[float, float, float]
+    b: tuple[float, float, float]
+    distance_m: float
+    dz_m: float
+    inclination_deg: float
+
+
+@dataclass(frozen=True)
 class Save:
     """Save the layer files (``reason``: "autosave", "proceed" or "terminate")."""
 
@@ -266,6 +302,8 @@ Effect = (
     | ZeroPlates
     | DisplayScale
     | CrosshairScale
+    | AreaShown
+    | DhiShown
     | Save
     | Terminate
 )

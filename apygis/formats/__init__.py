@@ -56,6 +56,8 @@ _BUILTIN = {
     "dxf": "apygis.formats.dxf:DRIVER",
     "generate": "apygis.formats.arcinfo:DRIVER",
     "e00": "apygis.formats.e00:DRIVER",
+    "patb": "apygis.formats.patb:DRIVER",
+    "bluh": "apygis.formats.bluh:DRIVER",
     "gpkg": "apygis.formats.ogr:GPKG",
     "shp": "apygis.formats.ogr:SHP",
     "geojson": "apygis.formats.ogr:GEOJSON",

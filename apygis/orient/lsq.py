@@ -17,12 +17,12 @@ bundle adjustment on it:
   the error names those in the weakest direction. The cofactor matrix
   ``(J^T J)^-1`` of the solution gives the precisions.
 - The bundle adjustment (thousands of photos, hundreds of thousands of points)
-  cannot form a dense Jacobian. It will add, in this module, the sparse
-  normal equations ``N dx = -J^T f`` accumulated block by block (6 x 6
-  orientation blocks, 3 x 3 point blocks), reduced to the orientations by the
-  Schur complement and solved by a sparse Cholesky factorisation, with the
-  same :class:`LsqSolution` contract (``x``, ``f``, ``sigma0``,
-  ``redundancy``, precisions) so that reports and tests treat both alike.
+  cannot form a dense Jacobian: :mod:`apygis.orient.bundle` accumulates the
+  sparse normal equations block by block (6 x 6 orientation blocks, 3 x 3 point
+  blocks), reduces them to the orientations by the Schur complement and solves
+  them by a sparse factorisation; its :class:`~apygis.orient.bundle.BundleSolution`
+  carries the same figures (parameters, residuals, ``sigma0``, redundancy,
+  precisions), so that reports and tests treat both alike.
 """
 
 from __future__ import annotations

@@ -26,7 +26,12 @@ the journal still holds every entry, and the next save tries again; only a
 failed final save is an error (:class:`SaveError`), with the journal kept.
 
 The session never prints: it hands the operator's monitor lines to a
-``monitor`` callback (the CLI prints them).
+``monitor`` callback (the CLI prints them). A display follows the session
+through :meth:`Session.subscribe`: an observer is called on the session's
+thread after each event has been acted on (journaled, saved, sent to the
+motors), with the event and its effects; it must return at once (a graphic
+display hands the work to a thread of its own) and can never stop the
+session: an observer that raises is dropped, and the session goes on.
 """
 
 from __future__ import annotations
@@ -211,6 +216,7 @@ class Session:
         self._last_steps: tuple[int, int, int, int] = (0, 0, 0, 0)
         self._replaying = False
         self.display = DisplayState()
+        self._observers: list[Callable[[Session, object, list], None]] = []
         if self.journal_path.exists() and discard_journal:
             aside = _aside(self.journal_path)
             self.journal_path.rename(aside)
@@ -266,6 +272,35 @@ class Session:
             start_z_m=s.get("start_z_m", 0.0),
         )
 
+    # ------------------------------------------------------------------ observers
+
+    def subscribe(self, observer: Callable[[Session, object, list], None]) -> Callable[[], None]:
+        """Call ``observer(session, event, effects)`` after every event; returns an unsubscribe.
+
+        The observer runs on the session's thread once the event has been
+        acted on (an entry is journaled and on disk by then), for every
+        event that gave effects, journal recovery excepted (a subscriber
+        reads the session's state, :attr:`map` and :attr:`display`, when it
+        subscribes). It must not block: the session waits for nothing. An
+        observer that raises is logged and dropped; the session goes on.
+        """
+        self._observers.append(observer)
+
+        def unsubscribe() -> None:
+            with contextlib.suppress(ValueError):
+                self._observers.remove(observer)
+
+        return unsubscribe
+
+    def _notify(self, event, effects: list) -> None:
+        for obs in tuple(self._observers):
+            try:
+                obs(self, event, effects)
+            except Exception:
+                log.exception("a session observer failed and was dropped")
+                with contextlib.suppress(ValueError):
+                    self._observers.remove(obs)
+
     # ------------------------------------------------------------------ input
 
     def handle(self, event) -> list:
@@ -319,6 +354,8 @@ class Session:
                 raise
         for e in effects:
             self._effect(e)
+        if self._observers and journal and effects:
+            self._notify(event, effects)
         return effects
 
     def _effect(self, e) -> None:

@@ -133,7 +133,8 @@ def test_features_matches_tasks_roundtrip(tmp_path):
 
 
 def test_a_version_1_block_is_migrated(tmp_path):
-    """A block written with schema 1 (no x_azimuth_deg) opens, migrated once, its data kept."""
+    """A block written with schema 1 (no x_azimuth_deg, no adjustment tables) opens, migrated
+    step by step, its data kept."""
     path = tmp_path / "v1.block"
     con = sqlite3.connect(path)
     con.executescript(blockmod.SCHEMA_V1)
@@ -143,7 +144,9 @@ def test_a_version_1_block_is_migrated(tmp_path):
     con.commit()
     con.close()
     with Block.open(path) as b:
-        assert b.meta("schema_version") == str(SCHEMA_VERSION) == "2"
+        assert b.meta("schema_version") == str(SCHEMA_VERSION) == "3"
+        tables = {r[0] for r in b.conn.execute("SELECT name FROM sqlite_master")}
+        assert {"adjustments", "exterior", "adjusted_points", "residuals"} <= tables
         (im,) = b.images()
         assert (im.image, im.heading_deg, im.x_azimuth_deg) == (5, 90.0, None)
         b.update_images({5: {"x_azimuth_deg": 270.0}})
