@@ -55,12 +55,9 @@ def _have_qgis() -> bool:
     return res.returncode == 0
 
 
-def pytest_collection_modifyitems(config, items):
-    """Tests marked ``external`` are skipped, with the reason, when the folder is absent;
-    tests marked ``qgis`` when QGIS for the system Python is not installed.
-
-    Under CI (``CI`` set) either is an error instead, so CI always runs them.
-    """
+def _skip_without_qgis(items) -> None:
+    """Tests marked ``qgis`` are skipped when /usr/bin/python3 cannot import qgis.core
+    (an error under CI, where .ci/run installs python3-qgis)."""
     qgis = [item for item in items if item.get_closest_marker("qgis")]
     if qgis and not _have_qgis():
         if os.environ.get("CI"):
@@ -70,6 +67,48 @@ def pytest_collection_modifyitems(config, items):
             )
         for item in qgis:
             item.add_marker(pytest.mark.skip(reason=QGIS_WHY))
+
+
+#: Markers of tests that run Debian programs: marker -> (programs, package to install).
+TOOLS = {
+    "poppler": (("pdftotext", "pdftoppm"), "poppler-utils"),
+    "rsvg": (("rsvg-convert",), "librsvg2-bin"),
+}
+
+
+def _skip_missing_tools(items) -> None:
+    """Tests marked with a :data:`TOOLS` marker are skipped when its programs are missing.
+
+    Under CI (``CI=true``, where ``.ci/run`` installs them) a missing program is an error.
+    """
+    import shutil
+
+    for marker, (programs, package) in TOOLS.items():
+        missing = [p for p in programs if shutil.which(p) is None]
+        if not missing:
+            continue
+        marked = [item for item in items if item.get_closest_marker(marker)]
+        if not marked:
+            continue
+        why = (
+            f"needs {', '.join(missing)} from the Debian package {package} "
+            f"(apt-get install {package}), which is not installed"
+        )
+        if os.environ.get("CI"):
+            raise pytest.UsageError(f"CI is set and {len(marked)} collected tests {why}")
+        for item in marked:
+            item.add_marker(pytest.mark.skip(reason=why))
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests marked ``external`` are skipped, with the reason, when the folder is absent.
+
+    Under CI (``CI`` set) an absent folder is an error instead, so CI always runs them.
+    Tests that need Debian programs are handled by :func:`_skip_missing_tools`, tests
+    marked ``qgis`` (QGIS for the system Python) by :func:`_skip_without_qgis`.
+    """
+    _skip_missing_tools(items)
+    _skip_without_qgis(items)
     if EXTERNAL.is_dir():
         return
     marked = [item for item in items if item.get_closest_marker("external")]

@@ -42,6 +42,13 @@ OTHERS = {
     "apygis.formats.batch.convert_many",
     "apygis.formats.dxf.write.encode",
     "apygis.plot.drawing.build_drawing",
+    "apygis.plot.labels.place_labels",
+    "apygis.plot._mpl.drawing_figure",
+    "apygis.plot.pdf.drawing_pdf",
+    "apygis.plot.pdf.text_pages_pdf",
+    "apygis.plot.raster.drawing_png",
+    "apygis.plot.raster.drawing_rgba",
+    "apygis.plot.raster.drawing_tiff",
     "apygis.aerotri.synth.synth_block",
     "apygis.aerotri.project.init_block",
     "apygis.aerotri.pyramid.build_pyramid",
@@ -167,10 +174,48 @@ def test_build_drawing_progress(sample_map):
     rec = Recorder()
     build_drawing(sample_map, progress=rec)
     check_calls(rec.calls, "build_drawing")
-    assert rec.calls[-1] == (len(sample_map.layers), len(sample_map.layers))
+    assert rec.calls[-1] == (STEPS, STEPS)
     rec = Recorder()
     build_drawing(apygis.MapFile("E", scale=1000), progress=rec)
-    assert rec.calls == [(0, 0)]  # nothing to do: done at once
+    check_calls(rec.calls, "build_drawing (empty)")
+
+
+def test_plot_output_progress(sample_map):
+    """Label placement, the figure and every rendering report as they go."""
+    import numpy as np
+
+    from apygis.plot._mpl import drawing_figure
+    from apygis.plot.drawing import build_drawing
+    from apygis.plot.labels import LabelRequest, place_labels
+    from apygis.plot.pdf import drawing_pdf, text_pages_pdf
+    from apygis.plot.raster import drawing_png, drawing_rgba, drawing_tiff
+
+    d = build_drawing(sample_map)
+    for name, call in [
+        ("drawing_pdf", lambda p: drawing_pdf(d, progress=p)),
+        ("drawing_png", lambda p: drawing_png(d, dpi=30, progress=p)),
+        ("drawing_rgba", lambda p: drawing_rgba(d, dpi=30, progress=p)),
+        ("drawing_tiff", lambda p: drawing_tiff(d, dpi=30, progress=p)),
+        ("text_pages_pdf", lambda p: text_pages_pdf("a\n" * 150, progress=p)),
+    ]:
+        rec = Recorder()
+        call(rec)
+        check_calls(rec.calls, name)
+        assert len(rec.calls) > 2, name
+    rec = Recorder()
+    fig = drawing_figure(d, progress=rec)
+    assert rec.calls == []  # reported while the figure is drawn
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig).draw()
+    check_calls(rec.calls, "drawing_figure")
+    rec = Recorder()
+    reqs = [LabelRequest("A", 1.0, 1.0, 2.0, 1.4, 0.0, "point", 1.0)]
+    place_labels(reqs, [], np.zeros((0, 4)), (0, 0, 10, 10), progress=rec)
+    check_calls(rec.calls, "place_labels")
+    rec = Recorder()
+    place_labels([], [], np.zeros((0, 4)), (0, 0, 10, 10), progress=rec)
+    assert rec.calls == [(0, 0)]
 
 
 def test_convert_file_progress(sample_dir, tmp_path):

@@ -364,6 +364,7 @@ def lsm(
     corr_min: float = 0.75,
     sigma_max: float = 0.5,
     affine_max: float = 0.25,
+    noise_model: bool = True,
 ) -> LsmResult:
     """Least-squares matching of templates of ``ref`` at ``ref_xy`` into ``search``.
 
@@ -380,8 +381,11 @@ def lsm(
     ``||(A - A0) A0^-1||_2`` (with six affine parameters a 15 x 15 window of
     fine texture can fit a wrong place at correlation 0.8 - 0.9, but only with
     a grossly distorted ``A``: 0.34 .. 1.1 in simulation, against < 0.12 for
-    right matches at low SNR). Returns an :class:`LsmResult`; ``xy`` is the search point
-    homologous to ``ref_xy`` itself.
+    right matches at low SNR). ``noise_model=False`` leaves out the corrections of
+    interpolated noise (module docstring: no pixel-locking correction, covariance
+    ``s0^2 N^-1``): cheaper, but the iteration may then swing between neighbouring
+    half pixels. Returns an :class:`LsmResult`; ``xy`` is the search point homologous
+    to ``ref_xy`` itself.
     """
     ref_xy = np.asarray(ref_xy, dtype=float).reshape(-1, 2)
     n = len(ref_xy)
@@ -395,6 +399,7 @@ def lsm(
         corr_min=corr_min,
         sigma_max=sigma_max,
         affine_max=affine_max,
+        noise_model=noise_model,
     )
     if n <= _BATCH:
         return _lsm(ref, ref_xy, search, search_xy0, affine0, **kw)
@@ -423,6 +428,7 @@ def _lsm(
     corr_min: float,
     sigma_max: float,
     affine_max: float,
+    noise_model: bool = True,
 ) -> LsmResult:
     """:func:`lsm` for one batch of points."""
     n = len(ref_xy)
@@ -468,8 +474,12 @@ def _lsm(
         ra0, ra1 = r0[active], r1[active]
         tpa = tpl[active]
         la = tpa - ra0[:, None] - ra1[:, None] * g
-        qc, dqc = _q_dq(sc)
-        qr, dqr = _q_dq(sr)
+        if noise_model:
+            qc, dqc = _q_dq(sc)
+            qr, dqr = _q_dq(sr)
+        else:
+            qc = qr = np.ones((1, m), np.float32)
+            dqc = dqr = np.zeros((1, m), np.float32)
         # all window sums as one matrix product: P (n, 19, m) @ moments (m, 6)
         P = np.empty((active.size, 19, m))
         ga = np.multiply(ra1[:, None], gc, out=P[:, 3])
@@ -513,7 +523,8 @@ def _lsm(
         gradE = np.zeros((active.size, 8))
         gradE[:, 0:6] = R[:, [14, 15, 14, 14, 15, 15], [0, 0, 1, 2, 1, 2]] * (ra1 * ra1)[:, None]
         gradE[:, 7] = 2.0 * ra1 * sum_qs
-        dx = dx + np.einsum("nij,nj->ni", Ni, gradE * (0.5 * sig2[:, None]))
+        if noise_model:
+            dx = dx + np.einsum("nij,nj->ni", Ni, gradE * (0.5 * sig2[:, None]))
         sg, sgg, sgt = R[:, 8, 0], R[:, 7, 0], R[:, 17, 0]
         st, stt = tpl_sum[active], tpl_sq[active]
         cc = (sgt - sg * st / m) / np.sqrt(
@@ -570,8 +581,10 @@ def _lsm(
     # covariance: s0^2 and N corrected for the interpolated noise (module docstring)
     cov = np.full((n, 2, 2), np.nan)
     ci = np.flatnonzero(converged)
-    if ci.size:
+    if ci.size and noise_model:
         cov[ci] = _covariance(t[ci], A[ci], r1[ci], q_ref[ci], s0sq[ci], nmat[ci], u)
+    elif ci.size:
+        cov[ci] = (s0sq[ci, None, None] * np.linalg.inv(nmat[ci]))[:, :2, :2]
     res.xy = t
     res.affine = A
     res.gain = r1
@@ -662,7 +675,9 @@ def track(
     not ok with that level's reason (its ``xy`` mapped to level 0). The other
     keywords are :func:`lsm`'s, at every level (``sigma_max`` in that level's
     pixels; ``affine_max`` against the previous level's ``A``; ``tol_px`` at
-    full resolution, :data:`COARSE_TOL_PX` above it). Returns the
+    full resolution, :data:`COARSE_TOL_PX` above it). The noise model stays at
+    every level: without its correction of pixel locking the iteration can swing
+    between neighbouring half pixels and not converge. Returns the
     :class:`LsmResult` at level 0 (``iterations`` summed over levels).
     """
     ref_xy0 = np.asarray(ref_xy0, dtype=float).reshape(-1, 2)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from apygis.cli._common import run_guarded
+from apygis.cli._common import progress_bar, run_guarded
 
 
 @click.command()
@@ -13,9 +13,11 @@ from apygis.cli._common import run_guarded
     "-o",
     "--output",
     type=click.Path(),
-    help="Write to this file instead of stdout (.pdf: A4 pages in Courier).",
+    help="Write to this file instead of stdout (.pdf: A4 pages in DejaVu Sans Mono).",
 )
-@click.option("--driver", help="Read with this driver instead of guessing.")
+@click.option(
+    "--src-driver", "--driver", "driver", help="Read with this driver instead of guessing."
+)
 @click.option("--library", type=click.Path(), help="Symbol library for the names.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
 @run_guarded
@@ -23,7 +25,8 @@ def printout(path, output, driver, library, overwrite):
     """Symbol legend, symbols by code, line points with references, and texts.
 
     With -o NAME.pdf the print-out is a PDF of numbered A4 pages in a
-    monospaced font; any other name gets plain UTF-8 text.
+    monospaced font (DejaVu Sans Mono, embedded: any script it covers comes
+    out right); any other name gets plain UTF-8 text.
     """
     from pathlib import Path
 
@@ -42,8 +45,14 @@ def printout(path, output, driver, library, overwrite):
         raise FileOverwriteError(f"{output} exists; use --overwrite to replace it")
     if Path(output).suffix.lower() == ".pdf":
         from apygis.plot.pdf import text_pages, text_pages_pdf
+        from apygis.progress import STEPS, fraction
 
-        data = text_pages_pdf(text, title=f"APY print-out {m.id}")
+        with progress_bar(STEPS, f"print-out of {m.id}") as bar:
+
+            def advance(done: int, total: int) -> None:
+                bar.update(round(STEPS * fraction(done, total)) - bar.pos)
+
+            data = text_pages_pdf(text, title=f"APY print-out {m.id}", progress=advance)
         atomic_write_many({Path(output): data})
         n = len(text_pages(text))
         click.echo(f"print-out of {m.id} written to {output} ({n} A4 pages)")

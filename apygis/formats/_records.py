@@ -235,3 +235,88 @@ def fixed(v, width: int, decimals: int, path, record: str, what: str) -> str:
             f"{what} {v!r} does not fit the field F{width}.{decimals} of the format", path, record
         )
     return s.rjust(width)
+
+
+def photo_blocks(
+    data: bytes,
+    path,
+    what: str,
+    *,
+    max_line: int,
+    end: str,
+    end_text: str,
+    photo_hi: int,
+    point_key,
+    point_what: str,
+    unit: str,
+    to_mm: float,
+    limit: float,
+) -> list[tuple[int, list, np.ndarray, list[int]]]:
+    """The photo blocks of a bundle program's photo coordinate file (PAT-B's image
+    coordinates, BLUH's photo coordinates): a record with the photo number alone, then
+    one record ``key x y`` per point, closed by the record ``end``.
+
+    ``point_key(token, record)`` reads a point's key (a name or a number); coordinates are
+    in ``unit`` (``to_mm`` times millimetres; at most ``limit`` in size). Returns
+    ``(photo, keys, xy_mm (n, 2), lines)`` per photo in file order. A photo that appears
+    twice, a point measured twice in one photo, a photo left open at the end of the file,
+    a record of another shape are refused, naming the lines.
+    """
+    photos: list[tuple[int, list, np.ndarray, list[int]]] = []
+    first_line: dict[int, int] = {}
+    photo: int | None = None
+    keys: list = []
+    lines: list[int] = []
+    seen: dict = {}
+    xy: list[tuple[float, float]] = []
+    for k, text in text_lines(data, path, what, max_line=max_line):
+        tok = text.split()
+        rec = f"line {k}"
+        if not tok:
+            continue
+        if photo is None:
+            if len(tok) != 1:
+                raise FormatError(
+                    f"expected a photo record (the photo number alone), found {len(tok)} fields",
+                    path,
+                    rec,
+                )
+            photo = whole(tok[0], path, rec, "photo number", hi=photo_hi)
+            if photo in first_line:
+                raise FormatError(
+                    f"photo {photo} appears again (first at line {first_line[photo]})", path, rec
+                )
+            first_line[photo] = k
+            keys, lines, seen, xy = [], [], {}, []
+        elif len(tok) == 1 and tok[0] == end:
+            photos.append((photo, keys, np.array(xy, dtype=float).reshape(-1, 2), lines))
+            photo = None
+        elif len(tok) == 3:
+            key = point_key(tok[0], rec)
+            if key in seen:
+                shown = repr(key) if isinstance(key, str) else key
+                raise FormatError(
+                    f"point {shown} is measured twice in photo {photo} (also at line {seen[key]})",
+                    path,
+                    rec,
+                )
+            seen[key] = k
+            x = number(tok[1], path, rec, f"x ({unit})", limit=limit)
+            y = number(tok[2], path, rec, f"y ({unit})", limit=limit)
+            keys.append(key)
+            lines.append(k)
+            xy.append((x / to_mm, y / to_mm))
+        else:
+            raise FormatError(
+                f"expected a point record ({point_what}, x, y in {unit}) or {end} closing "
+                f"photo {photo}, found {len(tok)} fields",
+                path,
+                rec,
+            )
+    if photo is not None:
+        raise FormatError(
+            f"photo {photo} (line {first_line[photo]}) is not closed by {end_text}: "
+            "the file is truncated",
+            path,
+        )
+    return photos

@@ -44,7 +44,7 @@ from apygis.errors import FormatError, ValueRangeError
 from apygis.fileio import atomic_write
 from apygis.formats import Driver
 from apygis.formats._bundlemap import photo_measurements
-from apygis.formats._records import fixed, number, text_lines, whole
+from apygis.formats._records import fixed, number, photo_blocks, text_lines, whole
 
 __all__ = [
     "CODES",
@@ -137,69 +137,13 @@ def encode_photo_coordinates(
 
 def decode_photo_coordinates(data: bytes, path) -> list[PhotoRecords]:
     """The photos of a photo coordinate file (see :func:`encode_photo_coordinates`)."""
-    photos: list[PhotoRecords] = []
-    first_line: dict[int, int] = {}
-    current: PhotoRecords | None = None
-    seen: dict[int, int] = {}
-    xy: list[tuple[float, float]] = []
-    for k, text in text_lines(data, path, "a BLUH photo coordinate file", max_line=MAX_LINE):
-        tok = text.split()
-        rec = f"line {k}"
-        if not tok:
-            continue
-        if current is None:
-            if len(tok) != 1:
-                raise FormatError(
-                    f"expected a photo record (the photo number alone), found {len(tok)} fields",
-                    path,
-                    rec,
-                )
-            photo = whole(tok[0], path, rec, "photo number", hi=MAX_NUMBER)
-            if photo in first_line:
-                raise FormatError(
-                    f"photo {photo} appears again (first at line {first_line[photo]})", path, rec
-                )
-            first_line[photo] = k
-            current = PhotoRecords(photo, [], np.zeros((0, 2)), [])
-            seen, xy = {}, []
-        elif len(tok) == 1 and tok[0] == "0":
-            photos.append(current._replace(xy_mm=np.array(xy, dtype=float).reshape(-1, 2)))
-            current = None
-        elif len(tok) == 3:
-            num = whole(tok[0], path, rec, "point number", hi=MAX_NUMBER)
-            if num in seen:
-                raise FormatError(
-                    f"point {num} is measured twice in photo {current.photo} "
-                    f"(also at line {seen[num]})",
-                    path,
-                    rec,
-                )
-            seen[num] = k
-            current.numbers.append(num)
-            current.lines.append(k)
-            xy.append(
-                (
-                    number(tok[1], path, rec, "x (mm)", limit=1e6),
-                    number(tok[2], path, rec, "y (mm)", limit=1e6),
-                )
-            )
-        else:
-            raise FormatError(
-                f"expected a point record (number, x, y in mm) or 0 closing photo "
-                f"{current.photo}, found {len(tok)} fields",
-                path,
-                rec,
-            )
-    if current is not None:
-        raise FormatError(
-            f"photo {current.photo} (line {first_line[current.photo]}) is not closed by a "
-            "record 0: the file is truncated",
-            path,
-        )
-    return photos
-
-
-# ------------------------------------------------------------------ control
+    blocks = photo_blocks(
+        data, path, "a BLUH photo coordinate file", max_line=MAX_LINE, end="0",
+        end_text="a record 0", photo_hi=MAX_NUMBER,
+        point_key=lambda tok, rec: whole(tok, path, rec, "point number", hi=MAX_NUMBER),
+        point_what="number", unit="mm", to_mm=1.0, limit=1e6,
+    )  # fmt: skip
+    return [PhotoRecords(*b) for b in blocks]
 
 
 def encode_control(

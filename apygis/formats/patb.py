@@ -49,7 +49,7 @@ from apygis.errors import FormatError
 from apygis.fileio import atomic_write
 from apygis.formats import Driver
 from apygis.formats._bundlemap import photo_measurements
-from apygis.formats._records import check_name, fixed, name, number, text_lines, whole
+from apygis.formats._records import check_name, fixed, name, number, photo_blocks, text_lines, whole
 
 __all__ = [
     "DRIVER",
@@ -145,63 +145,13 @@ def decode_image_coordinates(data: bytes, path) -> list[PhotoRecords]:
     """The photos of an image-coordinate file (see :func:`encode_image_coordinates`), in
     file order; coordinates in mm. A photo that appears twice, a point measured twice in
     one photo, a photo not closed by ``-99`` are refused, naming the lines."""
-    photos: list[PhotoRecords] = []
-    first_line: dict[int, int] = {}
-    current: PhotoRecords | None = None
-    seen: dict[str, int] = {}
-    xy: list[tuple[float, float]] = []
-    for k, text in text_lines(data, path, "a PAT-B image-coordinate file", max_line=MAX_LINE):
-        tok = text.split()
-        rec = f"line {k}"
-        if not tok:
-            continue
-        if current is None:
-            if len(tok) != 1:
-                raise FormatError(
-                    f"expected a photo record (the photo number alone), found {len(tok)} fields",
-                    path,
-                    rec,
-                )
-            photo = whole(tok[0], path, rec, "photo number", hi=MAX_PHOTO)
-            if photo in first_line:
-                raise FormatError(
-                    f"photo {photo} appears again (first at line {first_line[photo]})", path, rec
-                )
-            first_line[photo] = k
-            current = PhotoRecords(photo, [], np.zeros((0, 2)), [])
-            seen, xy = {}, []
-        elif len(tok) == 1 and tok[0] == str(END):
-            photos.append(current._replace(xy_mm=np.array(xy, dtype=float).reshape(-1, 2)))
-            current = None
-        elif len(tok) == 3:
-            nm = name(tok[0], path, rec, "point name", max_len=NAME_LEN)
-            if nm in seen:
-                raise FormatError(
-                    f"point {nm!r} is measured twice in photo {current.photo} "
-                    f"(also at line {seen[nm]})",
-                    path,
-                    rec,
-                )
-            seen[nm] = k
-            x = number(tok[1], path, rec, "x (um)", limit=1e9)
-            y = number(tok[2], path, rec, "y (um)", limit=1e9)
-            current.names.append(nm)
-            current.lines.append(k)
-            xy.append((x / 1000.0, y / 1000.0))
-        else:
-            raise FormatError(
-                f"expected a point record (name, x, y in micrometres) or {END} closing photo "
-                f"{current.photo}, found {len(tok)} fields",
-                path,
-                rec,
-            )
-    if current is not None:
-        raise FormatError(
-            f"photo {current.photo} (line {first_line[current.photo]}) is not closed by {END}: "
-            "the file is truncated",
-            path,
-        )
-    return photos
+    blocks = photo_blocks(
+        data, path, "a PAT-B image-coordinate file", max_line=MAX_LINE, end=str(END),
+        end_text=str(END), photo_hi=MAX_PHOTO,
+        point_key=lambda tok, rec: name(tok, path, rec, "point name", max_len=NAME_LEN),
+        point_what="name", unit="um", to_mm=1000.0, limit=1e9,
+    )  # fmt: skip
+    return [PhotoRecords(*b) for b in blocks]
 
 
 # ------------------------------------------------------------------ control

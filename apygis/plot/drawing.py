@@ -1,109 +1,125 @@
-"""The plot of a map on paper: a list of drawing primitives in paper millimetres.
+"""The plot of a map on paper: a sheet of drawing primitives in paper millimetres.
 
-:func:`build_drawing` lays out a map once, by a :class:`~apygis.plot.plotdef.PlotterDef`;
-the HP-GL, SVG and PDF back-ends (:mod:`~apygis.plot.hpgl`,
-:mod:`~apygis.plot.svg`, :mod:`~apygis.plot.pdf`) only render the
-primitives. Paper coordinates are millimetres from the paper's lower-left
-corner, x to the right (ground X, east) and y up (ground Y, north)::
+:func:`build_drawing` lays a map out once; the back-ends
+(:mod:`~apygis.plot.hpgl`, :mod:`~apygis.plot.svg`, :mod:`~apygis.plot.pdf`,
+:mod:`~apygis.plot.raster`) only render the primitives
+(:mod:`~apygis.plot.primitives`). Paper coordinates are millimetres from the
+paper's lower-left corner, x to the right (ground X, east) and y up (ground
+Y, north)::
 
-    x_mm = (X - X0) * 1000 / scale        y_mm = (Y - Y0) * 1000 / scale
+    x_mm = (X - X0) * mm_per_unit        y_mm = (Y - Y0) * mm_per_unit
+    mm_per_unit = unit_m * 1000 / scale
 
-with ``(X0, Y0)`` the plot origin (ground metres at the paper's lower-left
-corner). At 1:5000, 1 m on the ground is 0.2 mm on paper.
+with ``(X0, Y0)`` the ground point at the paper's lower-left corner and
+``unit_m`` the metres in one unit of the map's CRS (1 for metres). At
+1:5000 in metres, 1 m on the ground is 0.2 mm on paper.
 
-Three primitives:
+The sheet (:mod:`~apygis.plot.layout`): the map window inside the neat
+line, the grid's ticks and labels around it (:mod:`~apygis.plot.margin`),
+and a panel beside or below it with the map's heading, north arrow and
+scale bar, the legend of what is drawn, and the title block.
 
-* :class:`PaperLine` — a polyline in one pen (map lines, the neat line, the
-  title box);
-* :class:`FilledRects` — filled rectangles in one pen: a symbol, its 15x15
-  bitmap cut into strokes of painted cells (see :func:`symbol_runs`);
-* :class:`PaperText` — a text in one pen, its lower-left corner (start of
-  the baseline) at ``(x, y)``, ``height`` the cap height in mm.
+What falls outside the neat line: lines are clipped at it (a line leaving
+and re-entering becomes several pieces); symbols whose centre lies outside
+are dropped, and the painted cells of a kept symbol are cut at the neat
+line; texts whose point lies outside are dropped. :attr:`Drawing.stats`
+counts what was drawn, clipped and dropped.
 
-What falls outside the neat line (the paper less its margins) is handled so:
-lines are clipped at the neat line (a line leaving and re-entering becomes
-several pieces); symbols and texts whose anchor point (the symbol centre, the
-text's start) lies outside are dropped, and the painted cells of a kept
-symbol are cut at the neat line. A text may run on past the neat line into
-the margin, and so may a spot height's label (it is dropped only if it would
-start off the paper). :attr:`Drawing.stats` counts what was drawn, clipped and dropped.
+Labels (texts and spot heights, a control plot's point numbers) are placed
+by :mod:`~apygis.plot.labels` off lines, symbols, the neat line and each
+other where an alternative position exists; those that could not be placed
+free are counted (``labels_overlapping``) and listed in
+:attr:`Drawing.unplaced`.
+
+A map in a geographic CRS (longitude, latitude) is plotted in the UTM zone
+of its centre (the title block says so); a CRS in feet is plotted in feet
+(its grid labelled in feet, its scale bar in feet). A map without a CRS is
+taken to be in metres.
 """
 
 from __future__ import annotations
 
-import functools
+import datetime as _dt
 import logging
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
 from apygis.errors import FormatError, RecordError
 from apygis.model.map import MapFile, crs_string
-from apygis.plot.plotdef import ISO_A_SIZES, TITLE_BLOCK_MM, PenDef, PlotterDef
-from apygis.progress import Progress
+from apygis.plot.fonts import missing_glyphs, text_size
+from apygis.plot.labels import LabelRequest, place_labels
+from apygis.plot.layout import COLUMN_MM, PanelSpec, plan_layout
+from apygis.plot.margin import (
+    CONTROL_MARK_MM,
+    Block,
+    LegendEntry,
+    control_mark,
+    grid_interval,
+    grid_items,
+    heading_block,
+    legend_blocks,
+    orientation_block,
+    title_block,
+)
+from apygis.plot.plotdef import PenDef, PlotterDef
+from apygis.plot.primitives import (
+    FilledPolygon,
+    FilledRects,
+    PaperLine,
+    PaperText,
+    clip_polyline,
+    make_text,
+    symbol_rects,
+    symbol_runs,
+)
+from apygis.progress import Progress, phase
 
 __all__ = [
-    "CAP_HEIGHT",
+    "MIN_GRID_MM",
     "SPOT_HEIGHT_CODE",
-    "TITLE_HEIGHTS_MM",
+    "ControlPoint",
     "Drawing",
+    "FilledPolygon",
     "FilledRects",
     "PaperLine",
     "PaperText",
     "build_drawing",
     "clip_polyline",
+    "plot_date",
     "symbol_runs",
 ]
 
 log = logging.getLogger(__name__)
 
-#: Cap height of the sans-serif font (Helvetica) as a fraction of its size.
-CAP_HEIGHT = 0.718
 #: The symbol code of the spot height.
 SPOT_HEIGHT_CODE = 0
-#: Cap heights of the two title lines, mm.
-TITLE_HEIGHTS_MM = (4.0, 2.5)
+#: The closest grid lines may be on paper, mm.
+MIN_GRID_MM = 2.0
 
 _EPS = 1e-9  # mm: points this close outside the neat line count as on it
+_UNIT_NAMES = {
+    "metre": "m",
+    "meter": "m",
+    "kilometre": "km",
+    "US survey foot": "ftUS",
+    "foot": "ft",
+    "international foot": "ft",
+}
 
 
-class PaperLine(NamedTuple):
-    """A polyline: ``points`` (n, 2) mm; ``closed`` joins the last point to the first.
+@dataclass(frozen=True)
+class ControlPoint:
+    """A control point of a control plot: its id, ground X, Y (CRS units) and Z (nan: none)."""
 
-    ``role`` is ``"line"`` (a map line), ``"frame"`` (the neat line) or
-    ``"title"`` (the title box).
-    """
-
-    pen: int
-    points: np.ndarray
-    closed: bool
-    role: str = "line"
-
-
-class FilledRects(NamedTuple):
-    """Filled rectangles ``rects`` (k, 4) as ``x0, y0, x1, y1`` mm: one symbol."""
-
-    pen: int
-    rects: np.ndarray
-    role: str = "symbol"
-
-
-class PaperText(NamedTuple):
-    """A text, lower-left at ``(x, y)`` mm, cap height ``height`` mm.
-
-    ``role`` is ``"text"`` (a map text), ``"spot-height"`` (a spot height's
-    label) or ``"title"``.
-    """
-
-    pen: int
+    id: str
     x: float
     y: float
-    height: float
-    text: str
-    role: str = "text"
+    z: float = math.nan
 
 
 @dataclass
@@ -119,22 +135,44 @@ class Drawing:
     scale : int
         Plot scale denominator.
     origin : (float, float)
-        Ground X, Y (metres) at the paper's lower-left corner.
+        Ground X, Y (CRS units) at the paper's lower-left corner.
     frame : (float, float, float, float)
-        The neat line ``x0, y0, x1, y1`` in mm (the paper less its margins).
+        The neat line ``x0, y0, x1, y1`` in mm.
     pens : dict of int to PenDef
         All pens of the plotter definition.
     items : list
-        :class:`PaperLine`, :class:`FilledRects` and :class:`PaperText`, in
-        drawing order.
+        The primitives of :mod:`apygis.plot.primitives`, in drawing order.
     map_id : str
-        The map's identification (for titles of the output files).
+        The map's identification.
     stats : dict
-        Counts: ``layers``, ``lines`` (map lines drawn, whole or in part),
-        ``line_pieces``, ``lines_clipped``, ``lines_dropped``, ``symbols``,
-        ``symbols_dropped``, ``spot_heights``, ``texts``, ``texts_dropped``,
-        ``labels_dropped`` (spot-height labels that would start off the
-        paper).
+        Counts: ``layers`` (the extensions plotted), ``lines`` (map lines
+        drawn, whole or in part), ``line_pieces``, ``lines_clipped``,
+        ``lines_dropped``, ``symbols``, ``symbols_dropped``, ``spot_heights``,
+        ``texts``, ``texts_dropped``, ``control_points``, ``labels`` (texts,
+        spot heights and point numbers placed), ``labels_moved`` (not at
+        their preferred position), ``labels_overlapping`` (could not be placed
+        free of lines, symbols, the neat line and other labels),
+        ``texts_missing_glyphs`` (texts with characters the font lacks).
+    mm_per_unit : float
+        Paper mm per ground unit (``unit_m * 1000 / scale``).
+    window : (float, float, float, float)
+        The ground the neat line encloses.
+    crs_name : str
+        The CRS plotted, in words.
+    unit : str
+        The CRS's unit (``m``, ``ftUS``...).
+    grid_interval : float or None
+        The grid's interval in CRS units (None: no grid).
+    crs : pyproj.CRS or None
+        The CRS plotted (the map's, or the UTM zone a geographic map is
+        plotted in).
+    unplaced : list of str
+        One line per label that could not be placed free: what it says and
+        what it collides with.
+    labels : list of (int, int, float, float)
+        Each placed label: the index of its :class:`PaperText` in
+        :attr:`items`, the index of the symbol it labels (-1: a text of the
+        map), and its anchor (the symbol's centre, or the text's point), mm.
     """
 
     width_mm: float
@@ -147,6 +185,18 @@ class Drawing:
     items: list = field(default_factory=list)
     map_id: str = ""
     stats: dict = field(default_factory=dict)
+    mm_per_unit: float = 0.0
+    window: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    crs_name: str = ""
+    unit: str = "m"
+    grid_interval: float | None = None
+    unplaced: list[str] = field(default_factory=list)
+    crs: Any = None
+    labels: list[tuple[int, int, float, float]] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if not self.mm_per_unit:
+            self.mm_per_unit = 1000.0 / self.scale
 
     @property
     def mm_per_m(self) -> float:
@@ -154,13 +204,13 @@ class Drawing:
         return 1000.0 / self.scale
 
     def to_paper(self, x, y) -> tuple[np.ndarray, np.ndarray]:
-        """Ground X, Y (metres) to paper x, y (mm).
+        """Ground X, Y (CRS units) to paper x, y (mm).
 
         >>> d = Drawing(100, 100, "", 5000, (1000.0, 2000.0), (0, 0, 100, 100), {})
         >>> [float(v) for v in d.to_paper(1100.0, 2050.0)]
         [20.0, 10.0]
         """
-        f = self.mm_per_m
+        f = self.mm_per_unit
         return (
             (np.asarray(x, dtype=float) - self.origin[0]) * f,
             (np.asarray(y, dtype=float) - self.origin[1]) * f,
@@ -175,10 +225,11 @@ class Drawing:
         return sum(1 for it in self.items if isinstance(it, kind) and role in (None, it.role))
 
     def summary(self) -> str:
-        """One line: paper, scale, counts.
+        """One line: paper, scale, counts, and what could not be placed or drawn.
 
         Example: ``A2 landscape (594 x 420 mm), 1:5000, layers c e h r:
-        18 lines, 115 symbols (96 spot heights), 14 texts``.
+        18 lines, 115 symbols (96 spot heights), 14 texts; 110 labels
+        (31 moved), all placed free``.
         """
         s = self.stats
         out = (
@@ -187,148 +238,47 @@ class Drawing:
             f"{s.get('symbols', 0)} symbols ({s.get('spot_heights', 0)} spot heights), "
             f"{s.get('texts', 0)} texts"
         )
+        if s.get("control_points"):
+            out += f", {s['control_points']} control points"
 
         def n(k: str) -> str:
             word = k.split("_")[0]
             return f"{s[k]} {word if s[k] != 1 else word[:-1]}"
 
+        labels = s.get("labels", 0)
+        if labels:
+            over = s.get("labels_overlapping", 0)
+            out += f"; {labels} labels ({s.get('labels_moved', 0)} moved), "
+            out += "all placed free" if not over else f"{over} could not be placed free"
         if s.get("lines_clipped"):
             out += f"; {n('lines_clipped')} clipped at the neat line"
-        keys = ("lines_dropped", "symbols_dropped", "texts_dropped", "labels_dropped")
+        keys = ("lines_dropped", "symbols_dropped", "texts_dropped")
         dropped = [n(k) for k in keys if s.get(k)]
         if dropped:
-            out += "; dropped: " + ", ".join(dropped)
+            out += "; outside the neat line: " + ", ".join(dropped)
+        if s.get("texts_missing_glyphs"):
+            k = s["texts_missing_glyphs"]
+            out += f"; {k} text{'s' if k != 1 else ''} with characters the font lacks"
         return out
 
 
-# --------------------------------------------------------------------------- symbols
+# --------------------------------------------------------------------------- helpers
 
 
-def symbol_runs(bitmap) -> np.ndarray:
-    """The painted cells of a 15x15 bitmap as strokes: (k, 4) ``row0, col0, row1, col1``.
+def plot_date(date: str | _dt.date | None = None) -> str:
+    """The date a plot shows: ``date``, else $SOURCE_DATE_EPOCH's (reproducible builds), else today.
 
-    Rows and columns are inclusive; row 0 is the top. The rule, which draws
-    well with a pen: first every horizontal run of two or more painted cells
-    in a row; then the cells left over, joined into vertical runs (one cell
-    or more) down each column.
-
-    >>> from apygis.model.symbols import SPOT_HEIGHT_SYMBOL
-    >>> symbol_runs(SPOT_HEIGHT_SYMBOL.bitmap).tolist()
-    [[7, 5, 7, 9], [5, 7, 6, 7], [8, 7, 9, 7]]
+    >>> plot_date(_dt.date(2024, 5, 1))
+    '2024-05-01'
     """
-    bm = np.asarray(bitmap, dtype=bool)
-    rows, cols = bm.shape
-    covered = np.zeros_like(bm)
-    out = []
-    for r in range(rows):
-        c = 0
-        while c < cols:
-            if bm[r, c]:
-                e = c
-                while e + 1 < cols and bm[r, e + 1]:
-                    e += 1
-                if e > c:
-                    out.append((r, c, r, e))
-                    covered[r, c : e + 1] = True
-                c = e + 1
-            else:
-                c += 1
-    rest = bm & ~covered
-    for c in range(cols):
-        r = 0
-        while r < rows:
-            if rest[r, c]:
-                e = r
-                while e + 1 < rows and rest[e + 1, c]:
-                    e += 1
-                out.append((r, c, e, c))
-                r = e + 1
-            else:
-                r += 1
-    return np.array(out, dtype=np.int64).reshape(-1, 4)
-
-
-@functools.lru_cache(maxsize=256)
-def _unit_rects(bits: bytes, shape: tuple[int, int]) -> np.ndarray:
-    """Rects of a bitmap in cell units, centred on the bitmap's centre, y up."""
-    bm = np.frombuffer(bits, dtype=bool).reshape(shape)
-    runs = symbol_runs(bm).astype(float)
-    half_r, half_c = shape[0] / 2.0, shape[1] / 2.0
-    x0 = runs[:, 1] - half_c
-    x1 = runs[:, 3] + 1.0 - half_c
-    y0 = half_r - runs[:, 2] - 1.0
-    y1 = half_r - runs[:, 0]
-    return np.column_stack([x0, y0, x1, y1])
-
-
-def _fallback_bitmap() -> np.ndarray:
-    """An open square of 5x5 cells: the mark of a code with no bitmap."""
-    bm = np.zeros((15, 15), dtype=bool)
-    bm[5, 5:10] = bm[9, 5:10] = True
-    bm[5:10, 5] = bm[5:10, 9] = True
-    return bm
-
-
-# --------------------------------------------------------------------------- clipping
-
-
-def clip_polyline(points, rect, closed: bool = False) -> list[np.ndarray]:
-    """The parts of a polyline inside ``rect`` (``x0, y0, x1, y1``), as open polylines.
-
-    Liang-Barsky on every segment; consecutive visible segments that are not
-    cut between them stay one piece. A closed line is clipped as a ring: its
-    last piece and its first are joined where the ring's first vertex is
-    inside. A single point is kept if it is inside.
-
-    >>> pieces = clip_polyline([(-5, 5), (5, 5), (5, 15), (5, 5.5)], (0, 0, 10, 10))
-    >>> [p.tolist() for p in pieces]
-    [[[0.0, 5.0], [5.0, 5.0], [5.0, 10.0]], [[5.0, 10.0], [5.0, 5.5]]]
-    """
-    pts = np.asarray(points, dtype=float).reshape(-1, 2)
-    xmin, ymin, xmax, ymax = (float(v) for v in rect)
-    if len(pts) == 0:
-        return []
-    if len(pts) == 1:
-        x, y = pts[0]
-        return [pts.copy()] if xmin <= x <= xmax and ymin <= y <= ymax else []
-    if closed:
-        pts = np.vstack([pts, pts[:1]])
-    p0 = pts[:-1]
-    d = pts[1:] - p0
-    n = len(p0)
-    t0 = np.zeros(n)
-    t1 = np.ones(n)
-    ok = np.ones(n, dtype=bool)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for p, q in (
-            (-d[:, 0], p0[:, 0] - xmin),
-            (d[:, 0], xmax - p0[:, 0]),
-            (-d[:, 1], p0[:, 1] - ymin),
-            (d[:, 1], ymax - p0[:, 1]),
-        ):
-            r = q / p
-            ok &= ~((p == 0) & (q < 0))
-            neg, pos = p < 0, p > 0
-            t0 = np.where(neg, np.maximum(t0, r), t0)
-            t1 = np.where(pos, np.minimum(t1, r), t1)
-    ok &= t0 <= t1
-    a = p0 + t0[:, None] * d
-    b = p0 + t1[:, None] * d
-    pieces: list[list[np.ndarray]] = []
-    cont = False  # does the current piece end at the segment's end, uncut?
-    for i in range(n):
-        if not ok[i]:
-            cont = False
-            continue
-        if cont and t0[i] == 0.0:
-            pieces[-1].append(b[i])
-        else:
-            pieces.append([a[i], b[i]])
-        cont = t1[i] == 1.0
-    if closed and len(pieces) > 1 and ok[0] and t0[0] == 0.0 and ok[-1] and t1[-1] == 1.0:
-        first = pieces.pop(0)
-        pieces[-1].extend(first[1:])
-    return [np.array(p) for p in pieces]
+    if isinstance(date, _dt.date):
+        return date.isoformat()
+    if date:
+        return str(date)
+    epoch = os.environ.get("SOURCE_DATE_EPOCH", "").strip()
+    if epoch.isdigit():
+        return _dt.datetime.fromtimestamp(int(epoch), _dt.UTC).date().isoformat()
+    return _dt.date.today().isoformat()
 
 
 def _inside(x, y, rect) -> np.ndarray:
@@ -340,45 +290,183 @@ def _inside(x, y, rect) -> np.ndarray:
     )
 
 
-# --------------------------------------------------------------------------- layout
+def _fallback_bitmap() -> np.ndarray:
+    """An open square of 5x5 cells: the mark of a code with no bitmap."""
+    bm = np.zeros((15, 15), dtype=bool)
+    bm[5, 5:10] = bm[9, 5:10] = True
+    bm[5:10, 5] = bm[5:10, 9] = True
+    return bm
 
 
-def _choose_paper(pdef: PlotterDef, need_w: float, need_h: float) -> tuple[float, float, str]:
-    """Paper width, height and label for a plot needing ``need_w`` x ``need_h`` mm."""
-    spec = pdef.paper
-    if spec.name == "custom":
-        return spec.width_mm, spec.height_mm, spec.label()
-    wide = need_w > need_h
-    pref = ("landscape", "portrait") if wide else ("portrait", "landscape")
-    orients = (spec.orientation,) if spec.orientation else pref
-    names = list(ISO_A_SIZES)[::-1] if spec.name == "auto" else [spec.name]  # A4 first
-    for name in names:
-        for o in orients:
-            w, h = ISO_A_SIZES[name] if o == "portrait" else ISO_A_SIZES[name][::-1]
-            if need_w <= w + 1e-6 and need_h <= h + 1e-6:
-                return w, h, f"{name} {o}"
-    name, o = names[-1], orients[0]
-    w, h = ISO_A_SIZES[name] if o == "portrait" else ISO_A_SIZES[name][::-1]
-    log.warning(
-        "the plot (%.0f x %.0f mm) does not fit on %s %s; what lies off the neat line is clipped",
-        need_w,
-        need_h,
-        name,
-        o,
-    )
-    return w, h, f"{name} {o}"
+def _crs_words(crs) -> str:
+    auth = crs_string(crs)
+    name = crs.name
+    if auth and not auth.startswith(("PROJCRS", "GEOGCRS", "COMPOUNDCRS", "{", "BOUNDCRS")):
+        return f"{name} ({auth})"
+    return name
 
 
-def _extent(layers) -> tuple[float, float, float, float] | None:
-    boxes = [e for e in (lay.extent() for lay in layers) if e is not None]
+def _horizontal(crs):
+    if crs.is_compound and crs.sub_crs_list:
+        return crs.sub_crs_list[0]
+    return crs
+
+
+def _plot_crs(m: MapFile) -> tuple[MapFile, Any, str]:
+    """The map to plot (reprojected to UTM if geographic), its CRS and the CRS in words."""
+    if m.crs is None:
+        return m, None, "none (coordinates taken as metres)"
+    h = _horizontal(m.crs)
+    if not h.is_geographic:
+        return m, m.crs, _crs_words(m.crs)
+    from pyproj import CRS
+
+    from apygis.model.reproject import reproject
+
+    boxes = [e for e in (lay.extent() for lay in m) if e is not None]
     if not boxes:
+        return m, m.crs, _crs_words(m.crs)
+    lon = (min(b[0] for b in boxes) + max(b[3] for b in boxes)) / 2.0
+    lat = (min(b[1] for b in boxes) + max(b[4] for b in boxes)) / 2.0
+    if abs(lat) <= 84.0:
+        zone = int((lon + 180.0) // 6.0) % 60 + 1
+        target = CRS.from_epsg((32600 if lat >= 0 else 32700) + zone)
+    else:
+        target = CRS.from_proj4(
+            f"+proj=aeqd +lat_0={lat:.6f} +lon_0={lon:.6f} +datum=WGS84 +units=m"
+        )
+    log.info("map %s is in longitude/latitude: plotted in %s", m.id, target.name)
+    words = f"{_crs_words(target)}, from {_crs_words(m.crs)}"
+    return reproject(m, target), target, words
+
+
+def _unit(crs) -> tuple[float, str]:
+    """Metres per CRS unit and the unit's short name."""
+    if crs is None:
+        return 1.0, "m"
+    axis = _horizontal(crs).axis_info[0]
+    factor = float(axis.unit_conversion_factor or 1.0)
+    return factor, _UNIT_NAMES.get(axis.unit_name, axis.unit_name)
+
+
+def _north(crs, window) -> str:
+    """Grid north, and the angle to true north at the window's centre."""
+    if crs is None:
+        return "grid north (no CRS: true north unknown)"
+    try:
+        from pyproj import Transformer
+
+        h = _horizontal(crs)
+        geo = h.geodetic_crs
+        if geo is None:
+            return "grid north"
+        cx, cy = (window[0] + window[2]) / 2.0, (window[1] + window[3]) / 2.0
+        to_geo = Transformer.from_crs(h, geo, always_xy=True)
+        to_grid = Transformer.from_crs(geo, h, always_xy=True)
+        lon, lat = to_geo.transform(cx, cy)
+        x2, y2 = to_grid.transform(lon, min(lat + 0.001, 89.999))
+        theta = math.degrees(math.atan2(x2 - cx, y2 - cy))
+    except Exception:  # a CRS PROJ cannot invert: the arrow still shows grid north
+        return "grid north"
+    if not math.isfinite(theta):
+        return "grid north"
+    if abs(theta) < 0.005:
+        return "grid north = true north"
+    side = "east" if theta > 0 else "west"
+    return f"grid north; true north {abs(theta):.2f} deg {side} of it"
+
+
+def _extent(layers, points: Sequence[ControlPoint]):
+    xs0, ys0, xs1, ys1 = [], [], [], []
+    for lay in layers:
+        e = lay.extent()
+        if e is not None:
+            xs0.append(e[0])
+            ys0.append(e[1])
+            xs1.append(e[3])
+            ys1.append(e[4])
+    for p in points:
+        xs0.append(p.x)
+        ys0.append(p.y)
+        xs1.append(p.x)
+        ys1.append(p.y)
+    if not xs0:
         return None
-    return (
-        min(b[0] for b in boxes),
-        min(b[1] for b in boxes),
-        max(b[3] for b in boxes),
-        max(b[4] for b in boxes),
-    )
+    return (min(xs0), min(ys0), max(xs1), max(ys1))
+
+
+def _label_reach(m: MapFile, exts, pdef: PlotterDef, control: bool) -> np.ndarray:
+    """Anchors of the labels and how far their preferred positions reach right and up, mm.
+
+    (n, 4): ground X, Y and the paper mm right and above: a text starts at its point, a
+    spot height's or control point's label starts right of its symbol.
+    """
+    th = pdef.text_height_mm
+    gap = max(pdef.symbol_size_mm / 2.0, pdef.symbol_size_mm * 2.5 / 15.0) + 0.4 * th
+    rows = []
+    for e in exts:
+        lay = m.layers[e]
+        sym = lay.symbols
+        if len(sym):
+            labelled = np.ones(len(sym), dtype=bool) if control else sym["code"] == SPOT_HEIGHT_CODE
+            for r in sym[labelled]:
+                z = f"{float(r['z']):.{pdef.height_decimals}f}"
+                text = f"{int(r['num'])}  {z}" if control else z
+                rows.append((float(r["x"]), float(r["y"]), gap + text_size(text, th)[0], th / 2.0))
+        if not control:
+            for r in lay.texts:
+                rows.append((float(r["x"]), float(r["y"]), text_size(str(r["text"]), th)[0], th))
+    return np.array(rows, dtype=float).reshape(-1, 4)
+
+
+def _in_window(x, y, window) -> np.ndarray:
+    if window is None:
+        return np.ones(np.shape(x), dtype=bool)
+    return (x >= window[0]) & (x <= window[2]) & (y >= window[1]) & (y <= window[3])
+
+
+def _legend_entries(
+    m: MapFile, exts, pdef: PlotterDef, lib, window, control: bool, points
+) -> list[LegendEntry]:
+    """The symbols and line codes the plot draws (those inside ``window`` when given)."""
+    from apygis.model.polylines import export_lines
+
+    sym_keys: dict[tuple[int, int], None] = {}
+    line_keys: dict[tuple[int, int, str], bool] = {}
+    for e in exts:
+        lay = m.layers[e]
+        s = lay.symbols
+        if len(s):
+            inside = _in_window(s["x"], s["y"], window)
+            for code in np.unique(s["code"][inside]).tolist():
+                sym_keys.setdefault((int(code), pdef.pen_for(e, "symbols", int(code))), None)
+        if control:
+            continue
+        ls = export_lines(lay)
+        for k in range(len(ls)):
+            a, b = int(ls.offsets[k]), int(ls.offsets[k + 1])
+            pts = ls.coords[a:b]
+            if window is not None and not _in_window(pts[:, 0], pts[:, 1], window).any():
+                continue
+            code = int(ls.codes[k])
+            key = (code, pdef.pen_for(e, "lines", code), e)
+            line_keys[key] = line_keys.get(key, True) and bool(ls.closed[k])
+    out = []
+    for code, pen in sorted(sym_keys):
+        bm = np.asarray(lib[code].bitmap, dtype=bool)
+        if not bm.any():
+            bm = _fallback_bitmap()
+        name = lib.name(code) if code != SPOT_HEIGHT_CODE else "spot height"
+        out.append(LegendEntry("symbol", code, pen, f"{code:02d} {name}", bm))
+    for (code, pen, e), closed in sorted(line_keys.items(), key=lambda kv: (kv[0][0], kv[0][2])):
+        what = "closed line" if closed else "line"
+        out.append(LegendEntry("line", code, pen, f"{what} {code:02d} (layer {e})", None, closed))
+    if points:
+        out.append(LegendEntry("control", 0, pdef.frame_pen, "control point (number, height)"))
+    return out
+
+
+# --------------------------------------------------------------------------- the sheet
 
 
 def build_drawing(
@@ -386,22 +474,45 @@ def build_drawing(
     plotdef: PlotterDef | None = None,
     library=None,
     layers: Sequence[str] | None = None,
+    *,
+    control: bool = False,
+    control_points: Sequence[ControlPoint] = (),
+    grid: str | None = None,
+    sources: Sequence[str] = (),
+    date: str | _dt.date | None = None,
     progress: Progress | None = None,
 ) -> Drawing:
-    """Lay out map ``m`` on paper.
+    """Lay out map ``m`` on a sheet.
 
     Parameters
     ----------
     m : MapFile
         The map.
     plotdef : PlotterDef, optional
-        Plotter parameters; default :meth:`PlotterDef.default`.
+        Plotter parameters (paper, scale, window or origin, margins, pens,
+        sizes, grid); default :meth:`PlotterDef.default`.
     library : SymbolLibrary, optional
         Symbol bitmaps; default :func:`apygis.model.symbols.load_library`.
     layers : sequence of str, optional
-        Layer extensions to plot (default: all, in alphabetical order).
+        Layer extensions to plot (default: all, in alphabetical order; for
+        a control plot the control layer ``c``).
+    control : bool
+        A control-point and grid plot (the seed's "control points- and or
+        grid-plot" for orienting a map): only the symbols of the layers
+        (the control points), each labelled with its point number and
+        height, the ``control_points`` given, and the grid as lines.
+    control_points : sequence of ControlPoint
+        Control points to draw too (from an orientation control file), each
+        a circle and cross labelled with its id and height.
+    grid : str, optional
+        ``"crosses"``, ``"lines"`` or ``"off"``; default the plotter
+        definition's (``"lines"`` for a control plot).
+    sources : sequence of str
+        The files the map was read from, for the title block.
+    date : str or datetime.date, optional
+        The date in the title block (:func:`plot_date`).
     progress : Progress, optional
-        ``progress(done, total)`` after each layer (:mod:`apygis.progress`).
+        ``progress(done, total)`` as the sheet is laid out (:mod:`apygis.progress`).
 
     Returns
     -------
@@ -412,18 +523,19 @@ def build_drawing(
     RecordError
         If ``layers`` names a layer the map lacks.
     FormatError
-        If neither the plotter definition nor the map gives a scale, or the
-        margins leave no room on the paper.
+        If the plotter definition is inconsistent, or the margins leave no
+        room on the paper.
 
     Examples
     --------
     >>> m = MapFile("T1", scale=1000)
     >>> _ = m.layer("r").add_line([(0, 0, 0), (100, 0, 0), (100, 50, 0)], code=12)
-    >>> d = build_drawing(m)
-    >>> d.paper, d.scale, d.origin, d.stats["lines"]
-    ('A4 landscape', 1000, (-15.0, -15.0), 1)
-    >>> d.items[1].points.tolist()
-    [[15.0, 15.0], [115.0, 15.0], [115.0, 65.0]]
+    >>> d = build_drawing(m, date="2024-01-01")
+    >>> d.paper, d.scale, d.stats["lines"]
+    ('A4 landscape', 1000, 1)
+    >>> line = next(it for it in d.items if isinstance(it, PaperLine) and it.role == "line")
+    >>> [[round(v, 3) for v in p] for p in (line.points - line.points[0]).tolist()]
+    [[0.0, 0.0], [100.0, 0.0], [100.0, 50.0]]
     """
     from apygis.model.polylines import export_lines
     from apygis.model.symbols import load_library
@@ -432,9 +544,11 @@ def build_drawing(
     problems = pdef.problems()
     if problems:
         raise FormatError("plotter definition: " + problems[0])
+    if grid is not None and grid not in ("crosses", "lines", "off"):
+        raise FormatError(f"grid must be crosses, lines or off, not {grid!r}")
     lib = load_library() if library is None else library
     if layers is None:
-        exts = sorted(m.layers)
+        exts = (["c"] if "c" in m.layers else []) if control else sorted(m.layers)
     else:
         exts = [e.lower() for e in layers]
         missing = [e for e in exts if e not in m.layers]
@@ -443,40 +557,111 @@ def build_drawing(
                 f"map {m.id} has no layer {', '.join(missing)} "
                 f"(its layers: {' '.join(sorted(m.layers)) or 'none'})"
             )
-    scale = pdef.scale or m.scale
-    if not scale:
-        raise FormatError(
-            f"map {m.id} has no compilation scale; give 'scale' in the plotter definition"
+    style = grid or pdef.grid
+    if control and grid is None and style == "crosses":
+        style = "lines"
+    pm, crs, crs_words = _plot_crs(m)
+    points = list(control_points)
+    if points and pm is not m:  # control points are in the map's CRS: reproject them too
+        from pyproj import Transformer
+
+        tr = Transformer.from_crs(m.crs, crs, always_xy=True)
+        xs, ys = tr.transform([p.x for p in points], [p.y for p in points])
+        points = [
+            ControlPoint(p.id, float(x), float(y), p.z)
+            for p, x, y in zip(points, xs, ys, strict=True)
+        ]
+    unit_m, unit = _unit(crs)
+    # a control plot covers the whole map, so that its grid orients the sheet
+    extent = _extent(list(pm.layers.values()) if control else [pm.layers[e] for e in exts], points)
+    label_reach = _label_reach(pm, exts, pdef, control)
+
+    def extent_at(f: float):
+        """The data and its labels at their preferred positions (they are sized on paper)."""
+        if extent is None or not len(label_reach):
+            return extent
+        x = label_reach[:, 0] + label_reach[:, 2] / f
+        y = label_reach[:, 1] + label_reach[:, 3] / f
+        return (
+            extent[0],
+            extent[1],
+            max(extent[2], float(x.max())),
+            max(extent[3], float(y.max())),
         )
-    f = 1000.0 / scale
-    ml, mb, mr, mt = pdef.margins_mm
-    ext = _extent([m.layers[e] for e in exts])
-    if pdef.origin is not None:
-        origin = (float(pdef.origin[0]), float(pdef.origin[1]))
-    elif ext is not None:
-        origin = (ext[0] - ml / f, ext[1] - mb / f)
-    else:
-        origin = (0.0, 0.0)
-    if ext is None:
-        need_w, need_h = ml + mr + 1.0, mb + mt + 1.0
-    else:
-        need_w = (ext[2] - origin[0]) * f + mr
-        need_h = (ext[3] - origin[1]) * f + mt
-    W, H, label = _choose_paper(pdef, need_w, need_h)
-    frame = (ml, mb, W - mr, H - mt)
-    if frame[2] <= frame[0] or frame[3] <= frame[1]:
+
+    scale_for_layout = pdef.scale or m.scale
+
+    # the margin panel's blocks (their heights decide the layout)
+    entries = (
+        _legend_entries(pm, exts, pdef, lib, pdef.window, control, points) if pdef.legend else []
+    )
+    fpen = pdef.frame_pen
+    gpen = pdef.grid_pen or fpen
+    subtitle = "control point and grid plot" if control else ""
+
+    def blocks_for(scale: int, f: float, interval: float | None, north: str) -> list[Block]:
+        out: list[Block] = []
+        if pdef.title or pdef.legend:
+            out.append(heading_block(m.id, scale, subtitle, fpen))
+        if pdef.legend:
+            out.append(orientation_block(f, unit, fpen, COLUMN_MM, scale))
+            out += legend_blocks(entries, pdef.symbol_size_mm, fpen, COLUMN_MM)
+        if pdef.title:
+            out.append(title_block(_title_rows(scale, interval, north), fpen, COLUMN_MM))
+        return out
+
+    sources_text = ", ".join(sources[:8]) + (
+        f" and {len(sources) - 8} more" if len(sources) > 8 else ""
+    )
+
+    def _title_rows(scale: int, interval: float | None, north: str) -> list[tuple[str, str]]:
+        sc = f"1:{scale}"
+        if m.scale and m.scale != scale:
+            sc += f" (compiled at 1:{m.scale})"
+        rows = [("map", m.id), ("scale", sc), ("CRS", crs_words)]
+        if interval is not None:
+            rows.append(("grid", f"{interval:g} {unit}, {style}"))
+        rows += [
+            ("north", north),
+            ("date", plot_date(date)),
+            ("source", sources_text or "(not from a file)"),
+            ("layers", " ".join(exts) or "none"),
+        ]
+        return rows
+
+    provisional_scale = int(scale_for_layout or 5000)
+    pf = unit_m * 1000.0 / provisional_scale
+    interval0 = None if style == "off" else (pdef.grid_interval or grid_interval(pf))
+    blocks = blocks_for(provisional_scale, pf, interval0, "grid north")
+    spec = PanelSpec(COLUMN_MM, tuple(b.height for b in blocks), pdef.title) if blocks else None
+    band = 6.0 if style != "off" else 2.0
+    lay = plan_layout(extent_at, pdef, m.scale, unit_m, spec, band)
+    f = lay.mm_per_unit
+    interval = None if style == "off" else (pdef.grid_interval or grid_interval(f))
+    if interval is not None and interval * f < MIN_GRID_MM:
         raise FormatError(
-            f"the margins ({ml:g}, {mb:g}, {mr:g}, {mt:g} mm) leave no room on {label} paper"
+            f"the grid interval {interval:g} {unit} is {interval * f:.3g} mm on paper at "
+            f"1:{lay.scale}; it must be at least {MIN_GRID_MM:g} mm "
+            f"({MIN_GRID_MM / f:.3g} {unit}), or the grid off"
         )
+    north = _north(crs, lay.window)
+    blocks = blocks_for(lay.scale, f, interval, north)
+
     d = Drawing(
-        width_mm=W,
-        height_mm=H,
-        paper=label,
-        scale=int(scale),
-        origin=origin,
-        frame=frame,
+        width_mm=lay.width_mm,
+        height_mm=lay.height_mm,
+        paper=lay.paper,
+        scale=lay.scale,
+        origin=lay.origin,
+        frame=lay.frame,
         pens=dict(pdef.pens),
         map_id=m.id,
+        mm_per_unit=f,
+        window=lay.window,
+        crs_name=crs_words,
+        unit=unit,
+        grid_interval=interval,
+        crs=crs,
     )
     stats: dict[str, Any] = dict.fromkeys(
         (
@@ -489,42 +674,56 @@ def build_drawing(
             "spot_heights",
             "texts",
             "texts_dropped",
-            "labels_dropped",
+            "control_points",
+            "labels",
+            "labels_moved",
+            "labels_overlapping",
+            "texts_missing_glyphs",
         ),
         0,
     )
     stats["layers"] = exts
     items = d.items
+    frame = lay.frame
     x0, y0, x1, y1 = frame
-    if pdef.frame:
-        corners = np.array([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], dtype=float)
-        items.append(PaperLine(pdef.frame_pen, corners, True, "frame"))
+
+    # the grid under the map
+    soft = np.zeros((0, 4))
+    grid_over: list = []
+    if interval is not None:
+        under, grid_over, soft = grid_items(frame, lay.window, interval, style, gpen)
+        items.extend(under)
 
     size = pdef.symbol_size_mm
-    cell = size / 15.0
     th = pdef.text_height_mm
     warned: set[int] = set()
+    requests: list[LabelRequest] = []
+    label_meta: list[tuple[int, str, str, int]] = []  # pen, role, description, symbol item
+    obstacle_lines: list[np.ndarray] = []
+    symbol_boxes: list[tuple[float, float, float, float]] = []
+    data_progress = phase(progress, 0, 3)
     for k, e in enumerate(exts):
-        if progress is not None and k:
-            progress(k, len(exts))
-        lay = m.layers[e]
+        if data_progress is not None:
+            data_progress(k, len(exts))
+        layer = pm.layers[e]
         # -- lines
-        ls = export_lines(lay)
-        if len(ls):
+        ls = export_lines(layer) if not control else None
+        if ls is not None and len(ls):
             px, py = d.to_paper(ls.coords[:, 0], ls.coords[:, 1])
             xy = np.column_stack([px, py])
             inside = _inside(px, py, frame)
             outside_count = np.add.reduceat((~inside).astype(np.int64), ls.offsets[:-1])
             pens = {int(c): pdef.pen_for(e, "lines", int(c)) for c in np.unique(ls.codes)}
-            for k in range(len(ls)):
-                a, b = int(ls.offsets[k]), int(ls.offsets[k + 1])
+            for j in range(len(ls)):
+                a, b = int(ls.offsets[j]), int(ls.offsets[j + 1])
                 pts = xy[a:b]
-                pen = pens[int(ls.codes[k])]
-                closed = bool(ls.closed[k])
-                if outside_count[k] == 0:
+                pen = pens[int(ls.codes[j])]
+                closed = bool(ls.closed[j])
+                if outside_count[j] == 0:
                     if len(pts) == 1:
                         pts = np.vstack([pts, pts])
                     items.append(PaperLine(pen, pts, closed))
+                    obstacle_lines.append(np.vstack([pts, pts[:1]]) if closed else pts)
                     stats["lines"] += 1
                     stats["line_pieces"] += 1
                     continue
@@ -538,14 +737,14 @@ def build_drawing(
                     if len(p) == 1:
                         p = np.vstack([p, p])
                     items.append(PaperLine(pen, p, False))
+                    obstacle_lines.append(p)
                     stats["line_pieces"] += 1
-        # -- symbols (spot heights with their labels)
-        sym = lay.symbols
+        # -- symbols (spot heights and control points get a label)
+        sym = layer.symbols
         if len(sym):
             sx, sy = d.to_paper(sym["x"], sym["y"])
             keep = _inside(sx, sy, frame)
             stats["symbols_dropped"] += int((~keep).sum())
-            labels = []
             for i in np.flatnonzero(keep):
                 code = int(sym["code"][i])
                 bm = np.asarray(lib[code].bitmap, dtype=bool)
@@ -554,70 +753,150 @@ def build_drawing(
                         log.warning("symbol code %02d has no bitmap; drawn as a square", code)
                         warned.add(code)
                     bm = _fallback_bitmap()
-                unit = _unit_rects(bm.tobytes(), bm.shape)
-                rects = unit * cell + np.array([sx[i], sy[i], sx[i], sy[i]])
+                rects = symbol_rects(bm, float(sx[i]), float(sy[i]), size)
+                if len(rects):
+                    symbol_boxes.append(
+                        (rects[:, 0].min(), rects[:, 1].min(), rects[:, 2].max(), rects[:, 3].max())
+                    )
+                else:
+                    symbol_boxes.append((sx[i], sy[i], sx[i], sy[i]))
+                own = len(symbol_boxes) - 1
                 rects[:, 0] = np.maximum(rects[:, 0], x0)
                 rects[:, 1] = np.maximum(rects[:, 1], y0)
                 rects[:, 2] = np.minimum(rects[:, 2], x1)
                 rects[:, 3] = np.minimum(rects[:, 3], y1)
                 rects = rects[(rects[:, 2] > rects[:, 0]) & (rects[:, 3] > rects[:, 1])]
-                items.append(FilledRects(pdef.pen_for(e, "symbols", code), rects))
+                spen = pdef.pen_for(e, "symbols", code)
+                sym_item = len(items)
+                items.append(FilledRects(spen, rects))
                 stats["symbols"] += 1
-                if code == SPOT_HEIGHT_CODE:
+                half = (symbol_boxes[own][2] - symbol_boxes[own][0]) / 2.0
+                gap = max(half, size * 2.5 / 15.0) + 0.4 * th
+                if code == SPOT_HEIGHT_CODE and not control:
                     stats["spot_heights"] += 1
                     text = f"{float(sym['z'][i]):.{pdef.height_decimals}f}"
-                    tx = float(sx[i]) + size * 2.5 / 15.0 + 0.4 * th
-                    ty = float(sy[i]) - th / 2.0
-                    if not _inside(tx, ty, (0.0, 0.0, W, H)):
-                        stats["labels_dropped"] += 1
-                        continue
-                    labels.append(
-                        PaperText(pdef.pen_for(e, "symbols", code), tx, ty, th, text, "spot-height")
-                    )
-            items.extend(labels)
+                    role = "spot-height"
+                    what = f"spot height {e} {int(sym['num'][i])} ({text})"
+                elif control:
+                    stats["control_points"] += 1
+                    z = float(sym["z"][i])
+                    text = f"{int(sym['num'][i])}  {z:.{pdef.height_decimals}f}"
+                    role = "control"
+                    what = f"control point {e} {int(sym['num'][i])}"
+                else:
+                    continue
+                w, dsc = text_size(text, th)
+                requests.append(
+                    LabelRequest(text, float(sx[i]), float(sy[i]), th, w, dsc, "point", gap, own)
+                )
+                label_meta.append((spen, role, what, sym_item))
         # -- texts
-        tx_ = lay.texts
-        if len(tx_):
+        tx_ = layer.texts
+        if len(tx_) and not control:
             px, py = d.to_paper(tx_["x"], tx_["y"])
             keep = _inside(px, py, frame)
             stats["texts_dropped"] += int((~keep).sum())
             pen = pdef.pen_for(e, "texts")
             for i in np.flatnonzero(keep):
-                items.append(PaperText(pen, float(px[i]), float(py[i]), th, str(tx_["text"][i])))
+                text = str(tx_["text"][i])
+                lack = missing_glyphs(text)
+                if lack:
+                    stats["texts_missing_glyphs"] += 1
+                    log.warning(
+                        "text %s.%s %d %r: the font (DejaVu Sans) lacks %r; they show as boxes",
+                        m.id,
+                        e,
+                        int(tx_["num"][i]),
+                        text,
+                        lack,
+                    )
+                w, dsc = text_size(text, th)
+                requests.append(
+                    LabelRequest(text, float(px[i]), float(py[i]), th, w, dsc, "text", 0.5)
+                )
+                label_meta.append((pen, "text", f"text {e} {int(tx_['num'][i])} {text!r}", -1))
                 stats["texts"] += 1
+    # control points from a file
+    if points:
+        px, py = d.to_paper([p.x for p in points], [p.y for p in points])
+        keep = _inside(px, py, frame)
+        stats["symbols_dropped"] += int((~keep).sum())
+        for i in np.flatnonzero(keep):
+            cp = points[int(i)]
+            x, y = float(px[i]), float(py[i])
+            mark_item = len(items)
+            items.extend(control_mark(x, y, fpen))
+            r = CONTROL_MARK_MM * 1.6
+            symbol_boxes.append((x - r, y - r, x + r, y + r))
+            own = len(symbol_boxes) - 1
+            text = cp.id if not math.isfinite(cp.z) else f"{cp.id}  {cp.z:.{pdef.height_decimals}f}"
+            w, dsc = text_size(text, th)
+            requests.append(LabelRequest(text, x, y, th, w, dsc, "point", r + 0.4 * th, own))
+            label_meta.append((fpen, "control", f"control point {cp.id}", mark_item))
+            stats["control_points"] += 1
+    if data_progress is not None:
+        data_progress(len(exts), len(exts))
 
-    if pdef.title:
-        _title_block(d, m, pdef, exts)
-    d.stats = stats
-    if progress is not None:
-        progress(len(exts), len(exts))
-    log.info("plot of %s: %s", m.id, d.summary() if d.stats else "")
-    return d
-
-
-def _title_block(d: Drawing, m: MapFile, pdef: PlotterDef, exts: list[str]) -> None:
-    """The title box below the neat line, full width, and its two lines."""
-    x0, y0, x1, _ = d.frame
-    top = y0 - 2.0
-    bottom = y0 - TITLE_BLOCK_MM
-    box = np.array([(x0, bottom), (x1, bottom), (x1, top), (x0, top)], dtype=float)
-    pen = pdef.frame_pen
-    d.items.append(PaperLine(pen, box, True, "title"))
-    h1, h2 = TITLE_HEIGHTS_MM
-    line1 = f"{m.id}   1:{d.scale}"
-    if m.scale and m.scale != d.scale:
-        line1 += f"   (compiled at 1:{m.scale})"
-    crs = crs_string(m.crs) if m.crs is not None else "none"
-    f = d.mm_per_m
-    e0, n0 = d.origin[0] + x0 / f, d.origin[1] + y0 / f
-    e1, n1 = d.origin[0] + x1 / f, d.origin[1] + d.frame[3] / f
-    line2 = (
-        f"CRS {crs}   layers {' '.join(exts) or 'none'}   "
-        f"neat line E {_fmt_m(e0)} - {_fmt_m(e1)}  N {_fmt_m(n0)} - {_fmt_m(n1)}"
+    # the labels, placed
+    placement = place_labels(
+        requests,
+        obstacle_lines,
+        np.array(symbol_boxes, dtype=float).reshape(-1, 4),
+        frame,
+        soft,
+        progress=phase(progress, 1, 3),
     )
-    d.items.append(PaperText(pen, x0 + 3.0, top - 1.5 - h1, h1, line1, "title"))
-    d.items.append(PaperText(pen, x0 + 3.0, bottom + 2.0, h2, line2, "title"))
+    for k, req in enumerate(requests):
+        pen, role, what, own_item = label_meta[k]
+        d.labels.append((len(items), own_item, req.x, req.y))
+        free = bool(placement.free[k])
+        items.append(
+            make_text(
+                pen, placement.x[k], placement.y[k], req.height, req.text, role, halo=not free
+            )
+        )
+        if not free:
+            hits = []
+            for name, arr in (
+                ("line", placement.lines),
+                ("symbol", placement.symbols),
+                ("label", placement.labels),
+            ):
+                v = int(arr[k])
+                if v:
+                    hits.append(f"{v} {name}{'s' if v != 1 else ''}")
+            if placement.frame[k]:
+                hits.append("the neat line")
+            d.unplaced.append(f"{what}: crosses {', '.join(hits)}")
+    stats["labels"] = len(requests)
+    stats["labels_moved"] = placement.moved
+    stats["labels_overlapping"] = placement.overlapping
+    margin_progress = phase(progress, 2, 3)
 
+    # the neat line, the grid's ticks and labels, and the panel
+    if pdef.frame:
+        corners = np.array([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], dtype=float)
+        items.append(PaperLine(fpen, corners, True, "frame"))
+    items.extend(grid_over)
+    if lay.panel is not None and lay.columns:
+        px0, _, _, py1 = lay.panel
+        from apygis.plot.layout import BLOCK_GAP_MM, GAP_MM
 
-def _fmt_m(v: float) -> str:
-    return f"{v:.0f}" if math.isclose(v, round(v), abs_tol=0.005) else f"{v:.2f}"
+        for c, col in enumerate(lay.columns):
+            cx = px0 + c * (COLUMN_MM + GAP_MM)
+            top = py1
+            for j in col:
+                if j >= len(blocks):
+                    continue
+                blk = blocks[j]
+                if blk.name == "title" and j == len(blocks) - 1:
+                    top = lay.panel[1] + blk.height  # the title block sits at the bottom
+                items.extend(blk.draw(cx, top, COLUMN_MM))
+                top -= blk.height + BLOCK_GAP_MM
+    d.stats = stats
+    if d.unplaced:
+        log.info("labels that could not be placed free:\n  %s", "\n  ".join(d.unplaced))
+    if margin_progress is not None:
+        margin_progress(1, 1)
+    log.info("plot of %s: %s", m.id, d.summary())
+    return d

@@ -1,30 +1,43 @@
-"""HP-GL/2-compatible plotter output of a :class:`~apygis.plot.drawing.Drawing`.
+"""Pen plotter output of a :class:`~apygis.plot.drawing.Drawing`: HP-GL/1, or HP-GL/2 on request.
 
 APY drove "drafting plotters", flat bed or drum, through its PLOTTER.DEF;
-HP-GL is the language those plotters share. The output uses a small,
-widely understood subset, in absolute plotter units of 0.025 mm (40 per mm)
-with (0, 0) at the paper's lower-left corner::
+HP-GL is the language those plotters share. Coordinates are absolute
+plotter units of 0.025 mm (40 per mm), (0, 0) at the paper's lower-left
+corner.
 
-    IN;                       initialise
-    PA;                       absolute coordinates
-    DT\\x03;                   labels end with ETX (character 3)
-    PW0.35,1;                 pen widths in mm, one per pen used (HP-GL/2)
-    SP1;                      select pen 1
+**HP-GL/1** (the default; what an HP 7475A, 7550A or DraftPro understands)::
+
+    IN;PA;DT\\x03;            initialise, absolute coordinates, labels end with ETX
+    SP1;                      select pen 1 (its width is whatever sits in that slot)
     PU600,600;PD800,600,...;  pen up to a point, pen down along a polyline
-    SI0.125,0.25;             character width and cap height in cm
-    PU900,700;LBKirchweg\\x03; a label, its lower-left corner at the pen
+    SI0.137,0.25;DI1,0;       character width and cap height in cm; direction
+    PU900,700;LBKirchweg\\x03; a label, the start of its baseline at the pen
     PU;SP0;                   lift the pen and put it away
 
-Each instruction group ends with a newline (plotters ignore it). Items are
-drawn pen by pen (pen 1 first) to save pen changes, each pen's items in
-drawing order. A closed line returns to its first point. A symbol's painted
-cells (:class:`~apygis.plot.drawing.FilledRects`) are hatched with
+No ``PW``: HP-GL/1 has no pen widths; the plotter definition's widths
+decide how densely symbols are hatched, and the pens in the carousel draw.
+
+**HP-GL/2** (``version=2``) adds, after ``IN;PA;DT\\x03;``: ``WU0;`` (widths
+in mm), ``NPn;`` and ``CR0,255,0,255,0,255;`` with ``PCpen,r,g,b;`` for the
+pens' colours, ``PWwidth,pen;`` for their widths, and ``LA1,4,2,4;`` (round
+caps and joins).
+
+Items are drawn pen by pen (pen 1 first) to save pen changes, each pen's
+items in drawing order. A closed line returns to its first point. Filled
+rectangles (a symbol's painted cells, the scale bar) are hatched with
 strokes along each rectangle's longer side, as many as the pen needs to
-cover its shorter side (one stroke for a one-cell-wide run when the pen is
-at least a cell wide), the strokes inset by half the pen width so that the
-ink covers the cells and no more, alternating in direction. Labels are
-ASCII: German umlauts become ``ae oe ue`` (``ss`` for ``ß``), other accents
-are dropped and what is left outside ASCII becomes ``?``.
+cover its shorter side (:func:`hatch_strokes`); filled polygons (the north
+arrow) with horizontal strokes a pen width apart (:func:`hatch_polygon`).
+
+**Labels**: a label in printable ASCII is written with ``LB`` in the
+plotter's stick font, its character width set (``SI``) so that the label
+is as long as the layout measured it in DejaVu Sans (a stick character
+cell is 1.5 character widths), so that placed labels keep clear of what
+they were placed to avoid; a turned label sets ``DI``. A label with any
+other character (``Zürich``, ``Łódź``, ``Ελλάδα``) cannot be held by the
+plotter's character set: it is drawn as the outlines of its DejaVu Sans
+glyphs (pen strokes), nothing dropped or replaced; ``report["outlined"]``
+counts them.
 
 Examples
 --------
@@ -35,7 +48,6 @@ Examples
 >>> d.items.append(PaperLine(1, np.array([(15.0, 15.0), (20.0, 15.0)]), False))
 >>> print(drawing_hpgl(d).decode("ascii"))
 IN;PA;DT\x03;
-PW0.35,1;
 SP1;
 PU600,600;PD800,600;
 PU;SP0;
@@ -45,36 +57,38 @@ PU;SP0;
 from __future__ import annotations
 
 import math
-import unicodedata
 
 import numpy as np
 import numpy.typing as npt
 
-from apygis.plot.drawing import Drawing, FilledRects, PaperLine, PaperText
+from apygis.plot.fonts import text_outlines, text_size
+from apygis.plot.primitives import FilledPolygon, FilledRects, PaperLine, PaperText
 
-__all__ = ["CHAR_WIDTH", "ETX", "UNITS_PER_MM", "ascii_label", "drawing_hpgl", "hatch_strokes"]
+__all__ = [
+    "CELL",
+    "ETX",
+    "UNITS_PER_MM",
+    "drawing_hpgl",
+    "hatch_polygon",
+    "hatch_strokes",
+    "is_plotter_text",
+]
 
 #: Plotter units per millimetre (1 unit = 0.025 mm).
 UNITS_PER_MM = 40
 #: Label terminator.
 ETX = "\x03"
-#: Character width (``SI``) as a fraction of the cap height.
-CHAR_WIDTH = 0.5
-
-_UMLAUTS = str.maketrans(
-    {"ä": "ae", "ö": "oe", "ü": "ue", "Ä": "Ae", "Ö": "Oe", "Ü": "Ue", "ß": "ss"}
-)
+#: A stick-font character cell is this many character widths wide (the glyph and its space).
+CELL = 1.5
 
 
-def ascii_label(text: str) -> str:
-    """A label in plain ASCII for the plotter's standard character set.
+def is_plotter_text(text: str) -> bool:
+    """Whether the plotter's standard character set holds ``text`` (printable ASCII).
 
-    >>> ascii_label("Zürichstraße Côte 5°")
-    'Zuerichstrasse Cote 5?'
+    >>> is_plotter_text("P 1091-01"), is_plotter_text("Zürich")
+    (True, False)
     """
-    t = unicodedata.normalize("NFKD", text.translate(_UMLAUTS))
-    t = "".join(ch for ch in t if not unicodedata.combining(ch))
-    return "".join(ch if 32 <= ord(ch) < 127 else "?" for ch in t)
+    return all(32 <= ord(ch) < 127 for ch in text)
 
 
 def hatch_strokes(rects, pen_width_mm: float) -> np.ndarray:
@@ -108,6 +122,37 @@ def hatch_strokes(rects, pen_width_mm: float) -> np.ndarray:
     return np.array(out, dtype=float).reshape(-1, 2, 2)
 
 
+def hatch_polygon(points, pen_width_mm: float) -> list[np.ndarray]:
+    """Strokes that fill a polygon: its outline, then horizontal strokes a pen width apart.
+
+    >>> strokes = hatch_polygon([(0, 0), (2, 0), (1, 2)], 0.5)
+    >>> len(strokes) > 3, bool(np.allclose(strokes[0][0], strokes[0][-1]))
+    (True, True)
+    """
+    import shapely
+
+    pts = np.asarray(points, dtype=float)
+    poly = shapely.Polygon(pts)
+    if not poly.is_valid:
+        poly = shapely.make_valid(poly)
+    out = [np.vstack([pts, pts[:1]])]
+    inner = poly.buffer(-pen_width_mm / 2.0)
+    if inner.is_empty:
+        return out
+    x0, y0, x1, y1 = inner.bounds
+    n = max(1, math.ceil((y1 - y0) / pen_width_mm))
+    for k in range(n + 1):
+        y = y0 + (y1 - y0) * k / max(n, 1)
+        cut = inner.intersection(shapely.LineString([(x0 - 1, y), (x1 + 1, y)]))
+        parts = getattr(cut, "geoms", [cut])
+        for g in parts:
+            if g.is_empty or g.geom_type != "LineString":
+                continue
+            seg = np.asarray(g.coords, dtype=float)
+            out.append(seg if k % 2 == 0 else seg[::-1])
+    return out
+
+
 def _pu(xy: npt.ArrayLike) -> np.ndarray:
     return np.rint(np.asarray(xy, dtype=float) * UNITS_PER_MM).astype(np.int64)
 
@@ -116,12 +161,37 @@ def _coords(units: np.ndarray) -> str:
     return ",".join(str(v) for v in units.ravel().tolist())
 
 
-def drawing_hpgl(d: Drawing) -> bytes:
-    """The drawing as HP-GL/2-compatible plotter instructions (ASCII bytes)."""
+def _polyline(pts: np.ndarray) -> str:
+    u = _pu(pts)
+    return f"PU{_coords(u[0])};PD{_coords(u[1:] if len(u) > 1 else u)};\n"
+
+
+def _num(v: float) -> str:
+    s = f"{v:.4f}".rstrip("0").rstrip(".")
+    return "0" if s in ("-0", "") else s
+
+
+def drawing_hpgl(d, version: int = 1, report: dict | None = None) -> bytes:
+    """The drawing as HP-GL/1 (``version=1``) or HP-GL/2 (``version=2``) instructions.
+
+    ``report``, when given, receives ``labels`` (labels written) and
+    ``outlined`` (labels drawn as glyph outlines, their characters outside
+    the plotter's character set).
+    """
+    if version not in (1, 2):
+        raise ValueError(f"HP-GL version must be 1 or 2, not {version!r}")
     out = [f"IN;PA;DT{ETX};\n"]
     used = d.used_pens()
-    out.append("".join(f"PW{d.pens[p].width_mm:g},{p};" for p in used if p in d.pens) + "\n")
-    size = None
+    if version == 2 and used:
+        out.append(f"WU0;NP{max(max(used), 2)};CR0,255,0,255,0,255;LA1,4,2,4;\n")
+        for p in used:
+            pen = d.pens.get(p)
+            if pen is not None:
+                r, g, b = pen.colour
+                out.append(f"PC{p},{r},{g},{b};PW{_num(pen.width_mm)},{p};")
+        out.append("\n")
+    size = direction = None
+    labels = outlined = 0
     for pen in used:
         out.append(f"SP{pen};\n")
         pw = d.pens[pen].width_mm if pen in d.pens else 0.35
@@ -132,19 +202,39 @@ def drawing_hpgl(d: Drawing) -> bytes:
                 pts = it.points
                 if it.closed:
                     pts = np.vstack([pts, pts[:1]])
-                u = _pu(pts)
-                out.append(f"PU{_coords(u[0])};PD{_coords(u[1:] if len(u) > 1 else u)};\n")
+                out.append(_polyline(pts))
             elif isinstance(it, FilledRects):
                 for st in hatch_strokes(it.rects, pw):
-                    u = _pu(st)
-                    out.append(f"PU{_coords(u[0])};PD{_coords(u[1])};\n")
+                    out.append(_polyline(st))
+            elif isinstance(it, FilledPolygon):
+                for st in hatch_polygon(it.points, pw):
+                    out.append(_polyline(st))
             elif isinstance(it, PaperText):
-                cm = it.height / 10.0
-                si = f"SI{CHAR_WIDTH * cm:.4g},{cm:.4g};"
+                if not it.text.strip():
+                    continue
+                labels += 1
+                if not is_plotter_text(it.text):
+                    outlined += 1
+                    for ring in text_outlines(it.text, it.x, it.y, it.height, it.angle):
+                        out.append(_polyline(ring))
+                    continue
+                width = it.width or text_size(it.text, it.height)[0]
+                n = len(it.text)
+                w = width / (CELL * n - (CELL - 1.0))
+                w = min(max(w, 0.25 * it.height), 1.5 * it.height)
+                si = f"SI{_num(w / 10.0)},{_num(it.height / 10.0)};"
                 if si != size:
                     out.append(si + "\n")
                     size = si
+                a = math.radians(it.angle)
+                di = f"DI{_num(math.cos(a))},{_num(math.sin(a))};"
+                if di != direction and (direction is not None or it.angle):
+                    out.append(di + "\n")
+                    direction = di
                 u = _pu((it.x, it.y))
-                out.append(f"PU{_coords(u)};LB{ascii_label(it.text)}{ETX};\n")
+                out.append(f"PU{_coords(u)};LB{it.text}{ETX};\n")
     out.append("PU;SP0;\n")
+    if report is not None:
+        report["labels"] = labels
+        report["outlined"] = outlined
     return "".join(out).encode("ascii")

@@ -7,8 +7,9 @@ after ``;`` (or after a ``#`` that does not start a ``#rrggbb`` colour)::
 
     paper A3 landscape        ; A0-A4, auto, or W x H in mm
     scale 5000                ; plot scale denominator (default: the map's)
-    origin 2683000 1246925    ; ground X Y at the paper's lower-left corner
-    margin 15                 ; mm, or: left bottom right top
+    window 2683000 1247000 2685400 1248600   ; the map window, ground X0 Y0 X1 Y1
+    margin 10                 ; mm, or: left bottom right top
+    grid crosses              ; crosses, lines or off; grid-interval in CRS units
     symbol-size 3             ; mm, the width of a 15x15 symbol bitmap
     text-height 2.5           ; mm, the cap height of texts
     pendef 2 #0070c0 0.25     ; pen number, colour, width in mm
@@ -44,14 +45,15 @@ from apygis.formats._io import read_bytes
 
 __all__ = [
     "COLOURS",
+    "GRID_STYLES",
     "ISO_A_SIZES",
     "KINDS",
-    "TITLE_BLOCK_MM",
     "PaperSpec",
     "PenDef",
     "PenRule",
     "PlotterDef",
     "parse_colour",
+    "parse_paper",
     "parse_plotdef",
     "read_plotdef",
 ]
@@ -84,8 +86,8 @@ COLOURS = {
 #: The record kinds a ``pen`` rule may be limited to.
 KINDS = ("symbols", "lines", "texts")
 
-#: Height of the title block below the neat line, including its 2 mm gap.
-TITLE_BLOCK_MM = 14.0
+#: The styles of the coordinate grid (``grid`` key).
+GRID_STYLES = ("crosses", "lines", "off")
 
 _HEX_COLOUR = re.compile(r"#[0-9A-Fa-f]{6}")
 _NUMBER = re.compile(r"[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?")
@@ -208,10 +210,14 @@ class PlotterDef:
     scale : int or None
         Plot scale denominator; None plots at the map's compilation scale.
     origin : (float, float) or None
-        Ground X, Y (metres) at the paper's lower-left corner; None puts the
-        lower-left of the plotted data at the left and bottom margins.
+        Ground X, Y (CRS units) at the paper's lower-left corner: fixes where
+        the ground lies on the paper; the map window is then what the neat
+        line encloses. None (the default) centres the window on the paper.
+    window : (float, float, float, float) or None
+        The map window ``X0, Y0, X1, Y1`` (ground, CRS units): what the neat
+        line encloses. None: the plotted data, padded and rounded outward.
     margins_mm : (float, float, float, float)
-        Left, bottom, right, top margins; the neat line runs along them.
+        Left, bottom, right, top margins: paper left white at its edges.
     symbol_size_mm : float
         Width (and height) of a symbol's 15x15 bitmap on paper.
     text_height_mm : float
@@ -219,11 +225,22 @@ class PlotterDef:
     height_decimals : int
         Decimals of spot-height labels (0 to 3).
     title : bool
-        Draw the title block (map ID, scale, CRS) below the neat line.
+        Draw the title block (map ID, scale, CRS, date, sources) in the margin.
+    legend : bool
+        Draw the legend of the symbols and line codes used, the scale bar and
+        the north arrow in the margin.
+    grid : str
+        The coordinate grid: ``"crosses"``, ``"lines"`` or ``"off"``; it is
+        labelled at the neat line unless off.
+    grid_interval : float or None
+        Grid interval in CRS units; None chooses a round one (at least 35 mm
+        on paper).
     frame : bool
         Draw the neat line.
     frame_pen : int
-        Pen of the neat line and the title block.
+        Pen of the neat line and the margin's drawing and texts.
+    grid_pen : int or None
+        Pen of the grid and its labels; None: the frame pen.
     pens : dict of int to PenDef
         The pens by number.
     rules : tuple of PenRule
@@ -233,13 +250,18 @@ class PlotterDef:
     paper: PaperSpec = field(default_factory=PaperSpec)
     scale: int | None = None
     origin: tuple[float, float] | None = None
-    margins_mm: tuple[float, float, float, float] = (15.0, 15.0, 15.0, 15.0)
+    window: tuple[float, float, float, float] | None = None
+    margins_mm: tuple[float, float, float, float] = (10.0, 10.0, 10.0, 10.0)
     symbol_size_mm: float = 3.0
     text_height_mm: float = 2.5
     height_decimals: int = 1
     title: bool = True
+    legend: bool = True
+    grid: str = "crosses"
+    grid_interval: float | None = None
     frame: bool = True
     frame_pen: int = 1
+    grid_pen: int | None = None
     pens: dict[int, PenDef] = field(default_factory=_default_pens)
     rules: tuple[PenRule, ...] = field(default_factory=_default_rules)
 
@@ -266,14 +288,27 @@ class PlotterDef:
     def problems(self) -> list[str]:
         """What is inconsistent in this definition (empty if nothing)."""
         out = []
-        if self.title and self.margins_mm[1] < TITLE_BLOCK_MM:
+        if self.origin is not None and self.window is not None:
+            out.append("'origin' and 'window' both place the map on the paper; give one of them")
+        if self.window is not None:
+            x0, y0, x1, y1 = self.window
+            if not (x1 > x0 and y1 > y0):
+                out.append(
+                    f"the window {x0:g} {y0:g} {x1:g} {y1:g} is empty: "
+                    "expected X0 Y0 X1 Y1 with X1 > X0 and Y1 > Y0"
+                )
+        if self.grid not in GRID_STYLES:
+            out.append(f"grid must be one of {', '.join(GRID_STYLES)}, not {self.grid!r}")
+        if self.grid_interval is not None and not (
+            math.isfinite(self.grid_interval) and self.grid_interval > 0
+        ):
+            out.append(f"the grid interval must be positive, not {self.grid_interval!r}")
+        used = {r.pen for r in self.rules} | {self.frame_pen}
+        if self.grid_pen is not None and self.grid_pen not in self.pens:
             out.append(
-                f"the bottom margin ({self.margins_mm[1]:g} mm) is too small for the title "
-                f"block ({TITLE_BLOCK_MM:g} mm); enlarge it or set 'title off'"
+                f"grid-pen {self.grid_pen} is not defined; "
+                f"add 'pendef {self.grid_pen} COLOUR WIDTH'"
             )
-        used = {r.pen for r in self.rules} | (
-            {self.frame_pen} if self.frame or self.title else set()
-        )
         missing = sorted(used - set(self.pens))
         if missing:
             out.append(f"pens used but not defined with 'pendef': {missing}")
@@ -295,15 +330,23 @@ class PlotterDef:
             out.append(f"scale {self.scale}")
         if self.origin is not None:
             out.append(f"origin {self.origin[0]!r} {self.origin[1]!r}")
+        if self.window is not None:
+            out.append("window " + " ".join(repr(v) for v in self.window))
         out += [
             "margin " + " ".join(f"{v:g}" for v in self.margins_mm),
+            f"grid {self.grid}",
             f"symbol-size {self.symbol_size_mm:g}",
             f"text-height {self.text_height_mm:g}",
             f"height-decimals {self.height_decimals}",
             f"title {'on' if self.title else 'off'}",
+            f"legend {'on' if self.legend else 'off'}",
             f"frame {'on' if self.frame else 'off'}",
             f"frame-pen {self.frame_pen}",
         ]
+        if self.grid_interval is not None:
+            out.append(f"grid-interval {self.grid_interval!r}")
+        if self.grid_pen is not None:
+            out.append(f"grid-pen {self.grid_pen}")
         out += [f"pendef {n} {pd.hex} {pd.width_mm:g}" for n, pd in sorted(self.pens.items())]
         out.append("clear-pen-rules")
         for r in self.rules:
@@ -367,6 +410,20 @@ def _onoff(args: list[str], key: str) -> bool:
     return args[0].lower() in ("on", "yes", "1")
 
 
+def parse_paper(text: str) -> PaperSpec:
+    """A paper given in words: ``A3``, ``A3 landscape``, ``auto``, ``600x400`` (mm).
+
+    >>> parse_paper("a2 Landscape"), parse_paper("600 x 400 mm").size_mm()
+    (PaperSpec(name='A2', orientation='landscape', width_mm=0.0, height_mm=0.0), (600.0, 400.0))
+
+    Raises
+    ------
+    ValueError
+        Naming what was expected.
+    """
+    return _paper(text.split())
+
+
 def _paper(args: list[str]) -> PaperSpec:
     expected = (
         "paper: expected A0-A4, auto or a size 'W x H' in mm, then optionally "
@@ -414,15 +471,25 @@ _SINGLE_KEYS = {
     "paper",
     "scale",
     "origin",
+    "window",
     "margin",
+    "grid",
+    "grid-interval",
+    "legend",
     "symbol-size",
     "text-height",
     "height-decimals",
     "title",
     "frame",
     "frame-pen",
+    "grid-pen",
 }
-_ALIASES = {"margins": "margin", "symbol_size": "symbol-size", "text_height": "text-height"}
+_ALIASES = {
+    "margins": "margin",
+    "symbol_size": "symbol-size",
+    "text_height": "text-height",
+    "grid_interval": "grid-interval",
+}
 
 
 def parse_plotdef(text: str | bytes, path=None) -> PlotterDef:
@@ -485,6 +552,34 @@ def parse_plotdef(text: str | bytes, path=None) -> PlotterDef:
                     _number(args[0], "origin X", -1e12, 1e12),
                     _number(args[1], "origin Y", -1e12, 1e12),
                 )
+            elif key == "window":
+                if len(args) != 4:
+                    raise ValueError(
+                        "window: expected ground X0 Y0 X1 Y1 (lower-left, upper-right)"
+                    )
+                win = tuple(
+                    _number(a, f"window {w}", -1e12, 1e12)
+                    for a, w in zip(args, ("X0", "Y0", "X1", "Y1"), strict=True)
+                )
+                if not (win[2] > win[0] and win[3] > win[1]):
+                    raise ValueError(
+                        "window: expected X0 Y0 X1 Y1 with X1 > X0 and Y1 > Y0 "
+                        f"(lower-left, upper-right), found {' '.join(args)}"
+                    )
+                values["window"] = win
+            elif key == "grid":
+                if len(args) != 1 or args[0].lower() not in GRID_STYLES:
+                    raise ValueError(
+                        f"grid: expected one of {', '.join(GRID_STYLES)}, "
+                        f"found {' '.join(args) or 'nothing'}"
+                    )
+                values["grid"] = args[0].lower()
+            elif key == "grid-interval":
+                if len(args) != 1:
+                    raise ValueError("grid-interval: expected one interval in CRS units")
+                values["grid_interval"] = _number(args[0], "grid-interval", 0.0, 1e9, lo_open=True)
+            elif key == "legend":
+                values["legend"] = _onoff(args, key)
             elif key == "margin":
                 if len(args) not in (1, 4):
                     raise ValueError(
@@ -512,6 +607,10 @@ def parse_plotdef(text: str | bytes, path=None) -> PlotterDef:
                 if len(args) != 1:
                     raise ValueError("frame-pen: expected one pen number")
                 values["frame_pen"] = _integer(args[0], "frame-pen", 1, 99)
+            elif key == "grid-pen":
+                if len(args) != 1:
+                    raise ValueError("grid-pen: expected one pen number")
+                values["grid_pen"] = _integer(args[0], "grid-pen", 1, 99)
             elif key == "pendef":
                 if len(args) != 3:
                     raise ValueError(
@@ -551,7 +650,14 @@ def parse_plotdef(text: str | bytes, path=None) -> PlotterDef:
     pdef = replace(base, pens=pens, rules=tuple(rules), **values)
     problems = pdef.problems()
     if problems:
-        where = "margin" if "margin" in problems[0] else "frame-pen"
+        if "'origin' and 'window'" in problems[0]:
+            where = "window" if seen["window"] > seen["origin"] else "origin"
+        elif "window" in problems[0]:
+            where = "window"
+        elif "grid-pen" in problems[0]:
+            where = "grid-pen"
+        else:
+            where = "frame-pen"
         record = f"line {seen[where]}" if where in seen else None
         raise FormatError(problems[0], path=path, record=record)
     return pdef

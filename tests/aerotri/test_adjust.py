@@ -55,7 +55,7 @@ def test_semi_automatic_measurement_reaches_a_tenth_of_a_pixel(tiny_copy, tiny_b
     assert r.exit_code == 0, r.output
     assert "failed" in r.output
     e = _transfer_errors(tiny_copy, truth)
-    assert len(e) >= 8
+    assert len(e) >= 8, r.output
     assert np.sqrt(np.mean(e[:, :2] ** 2)) <= 0.10, e
 
 

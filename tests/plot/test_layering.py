@@ -80,7 +80,9 @@ def test_importing_plot_loads_no_driver():
 
     code = (
         "import sys, apygis.plot.drawing, apygis.plot.hpgl, apygis.plot.svg, "
-        "apygis.plot.pdf, apygis.plot.printout, apygis.plot.plotdef\n"
+        "apygis.plot.pdf, apygis.plot.raster, apygis.plot.printout, apygis.plot.plotdef, "
+        "apygis.plot.labels, apygis.plot.layout, apygis.plot.margin, apygis.plot.fonts, "
+        "apygis.plot.primitives, apygis.plot._mpl\n"
         "print(' '.join(sorted(m for m in sys.modules if m.startswith('apygis.'))))"
     )
     res = subprocess.run(
