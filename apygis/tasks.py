@@ -69,12 +69,26 @@ class Runner:
         self._client = self._cluster = None
 
     def run(
-        self, fn: Callable[..., Any], tasks: Iterable[tuple[Any, tuple]]
+        self,
+        fn: Callable[..., Any],
+        tasks: Iterable[tuple[Any, tuple]],
+        return_exceptions: bool = False,
     ) -> Iterator[tuple[Any, Any]]:
-        """``fn(*args)`` for each ``(key, args)``; yields ``(key, result)`` as they finish."""
+        """``fn(*args)`` for each ``(key, args)``; yields ``(key, result)`` as they finish.
+
+        With ``return_exceptions``, a task that raises (or whose worker died)
+        yields ``(key, exception)`` and the others go on; otherwise the run
+        stops with that error.
+        """
         if self._client is None:
             for key, args in tasks:
-                yield key, fn(*args)
+                try:
+                    result = fn(*args)
+                except Exception as exc:
+                    if not return_exceptions:
+                        raise
+                    result = exc
+                yield key, result
             return
         from distributed import as_completed
 
@@ -86,7 +100,13 @@ class Runner:
             return
         try:
             for fut in as_completed(list(futures)):
-                yield futures[fut], fut.result()
+                try:
+                    result = fut.result()
+                except Exception as exc:
+                    if not return_exceptions:
+                        raise
+                    result = exc
+                yield futures[fut], result
         finally:
             pending = [f for f in futures if not f.done()]
             if pending:

@@ -22,6 +22,9 @@ if os.environ.get("CI"):
     settings.load_profile("ci")
 
 ROOT = Path(__file__).resolve().parent.parent
+
+# scripts run by the system Python (QGIS, GDAL of the distribution), not by pytest
+collect_ignore = ["formats/qgis_render.py", "formats/gdal_open.py"]
 SAMPLES = ROOT / "samples"
 EXTERNAL = ROOT.parent / "shared" / "external"
 EXTERNAL_WHY = (
@@ -29,6 +32,41 @@ EXTERNAL_WHY = (
     f"OpenDroneMap's drone images) in {EXTERNAL}: the project's shared/external folder, "
     "which sits beside the checkout (see its README.md)"
 )
+
+
+QGIS_WHY = (
+    "needs QGIS for the system Python: Debian's python3-qgis "
+    "(apt-get install python3-qgis; .ci/run installs it under CI=true)"
+)
+
+
+def _have_qgis() -> bool:
+    import subprocess
+
+    try:
+        res = subprocess.run(
+            ["/usr/bin/python3", "-c", "import qgis.core"],
+            capture_output=True,
+            timeout=60,
+            env={**os.environ, "QT_QPA_PLATFORM": "offscreen"},
+        )
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return res.returncode == 0
+
+
+def _skip_without_qgis(items) -> None:
+    """Tests marked ``qgis`` are skipped when /usr/bin/python3 cannot import qgis.core
+    (an error under CI, where .ci/run installs python3-qgis)."""
+    qgis = [item for item in items if item.get_closest_marker("qgis")]
+    if qgis and not _have_qgis():
+        if os.environ.get("CI"):
+            raise pytest.UsageError(
+                f"CI is set and {len(qgis)} collected tests are marked qgis, but "
+                "/usr/bin/python3 cannot import qgis.core: .ci/run installs python3-qgis"
+            )
+        for item in qgis:
+            item.add_marker(pytest.mark.skip(reason=QGIS_WHY))
 
 
 #: Markers of tests that run Debian programs: marker -> (programs, package to install).
@@ -66,9 +104,11 @@ def pytest_collection_modifyitems(config, items):
     """Tests marked ``external`` are skipped, with the reason, when the folder is absent.
 
     Under CI (``CI`` set) an absent folder is an error instead, so CI always runs them.
-    Tests that need Debian programs are handled by :func:`_skip_missing_tools`.
+    Tests that need Debian programs are handled by :func:`_skip_missing_tools`, tests
+    marked ``qgis`` (QGIS for the system Python) by :func:`_skip_without_qgis`.
     """
     _skip_missing_tools(items)
+    _skip_without_qgis(items)
     if EXTERNAL.is_dir():
         return
     marked = [item for item in items if item.get_closest_marker("external")]

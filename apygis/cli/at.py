@@ -538,7 +538,10 @@ def at_sketch(block, output, points):
 @at.command("export")
 @click.argument("block", type=_block)
 @click.option(
+    "-o",
+    "--output",
     "--tiepoints",
+    "tiepoints",
     type=_picture,
     default=None,
     metavar="FILE.csv",

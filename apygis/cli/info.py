@@ -1,30 +1,34 @@
-"""``apygis info``: what a map holds."""
+"""``apygis info``: what a map holds, or which maps a folder holds."""
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import click
 
-from apygis.cli._common import run_guarded
+from apygis.cli._common import map_input_options, read_map, run_guarded
 
 
 @click.command()
 @click.argument("path", type=click.Path())
-@click.option("--driver", help="Read with this driver instead of guessing.")
+@map_input_options
 @click.option("--json", "as_json", is_flag=True, help="One JSON object (keys in the README).")
 @run_guarded
-def info(path: str, driver: str | None, as_json: bool) -> None:
+def info(path: str, as_json: bool, src: dict) -> None:
     """Map ID, scale, CRS and, per layer, counts, APY capacity used, extent and warnings.
 
-    PATH is a map file, or dir/ID for all APY layer files dir/ID.*.
+    PATH is a map file, dir/ID for all APY layer files dir/ID.*, or a folder:
+    the maps in it are listed (each readable file or APY map, with its
+    driver and counts; files that are no map are named with the reason).
     """
-    import apygis
-    from apygis.formats import driver_for, get_driver
+    p = Path(path)
+    if p.is_dir() and not _is_map_folder(p, src):
+        _folder(p, as_json, src)
+        return
     from apygis.model.summary import summarize
 
-    drv = get_driver(driver, "r") if driver else driver_for(path, "r")
-    m = apygis.read(path, driver=drv.name)
+    m, drv = read_map(path, src)
     s = {"path": path, "driver": drv.name, **summarize(m)}
     if as_json:
         click.echo(json.dumps(s, ensure_ascii=False))
@@ -66,3 +70,83 @@ def info(path: str, driver: str | None, as_json: bool) -> None:
             click.echo(f"  {i['severity']}: layer {ext}: {i['message']}")
     else:
         click.echo("\n  no validation findings")
+    if s["read_warnings"]:
+        click.echo("")
+        for w in s["read_warnings"]:
+            click.echo(f"  read: {w['message']}")
+
+
+def _is_map_folder(p: Path, src: dict) -> bool:
+    """A folder that is one map itself: a set of files apygis wrote (Shapefile, GeoJSON,
+    FlatGeobuf) with one prefix, or any folder when --src-driver names a driver."""
+    from apygis.formats import drivers
+
+    if src.get("src_driver"):
+        return True
+    for d in drivers().values():
+        if d.members is None or d.name in ("apy", "generate"):
+            continue
+        try:
+            if d.members(str(p)) is not None:
+                return True
+        except (OSError, ValueError):
+            continue
+    return False
+
+
+def _candidates(p: Path) -> list[Path]:
+    """The maps a folder may hold: each file, APY layer files grouped as dir/ID."""
+    from apygis.formats.apy import probe as apy_probe
+
+    out: list[Path] = []
+    seen: set[Path] = set()
+    for f in sorted(p.iterdir()):
+        if f.name.startswith(".") or not f.is_file():
+            continue
+        if apy_probe(f) and "." in f.name:
+            base = f.with_name(f.name.rsplit(".", 1)[0])
+            if base not in seen:
+                seen.add(base)
+                out.append(base)
+            continue
+        out.append(f)
+    return out
+
+
+def _folder(p: Path, as_json: bool, src: dict) -> None:
+    """The maps in folder ``p``, each with its driver and counts; the other files named."""
+    from apygis.errors import ApygisError
+    from apygis.model.summary import summarize
+
+    maps, others = [], []
+    for f in _candidates(p):
+        try:
+            m, drv = read_map(str(f), src)
+        except (ApygisError, OSError) as exc:
+            others.append({"path": str(f), "reason": str(exc)})
+            continue
+        s = summarize(m)
+        maps.append(
+            {
+                "path": str(f),
+                "driver": drv.name,
+                "id": s["id"],
+                "crs": s["crs"],
+                "layers": list(s["layers"]),
+                "totals": s["totals"],
+                "valid": s["valid"],
+                "warnings": s["warnings"],
+            }
+        )
+    if as_json:
+        click.echo(json.dumps({"path": str(p), "maps": maps, "not_maps": others}))
+        return
+    click.echo(f"{p}: {len(maps)} maps, {len(others)} other files")
+    for d in maps:
+        t = d["totals"]
+        click.echo(
+            f"  {d['path']}  ({d['driver']})  map {d['id']}, layers {','.join(d['layers']) or '-'}"
+            f": {t['symbols']} symbols, {t['line_points']} line points, {t['texts']} texts"
+        )
+    for o in others:
+        click.echo(f"  not a map: {o['reason']}")

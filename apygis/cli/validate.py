@@ -7,12 +7,12 @@ import sys
 
 import click
 
-from apygis.cli._common import run_guarded
+from apygis.cli._common import map_input_options, read_map, run_guarded
 
 
 @click.command()
 @click.argument("path", type=click.Path())
-@click.option("--driver", help="Read with this driver instead of guessing.")
+@map_input_options
 @click.option(
     "--json",
     "as_json",
@@ -20,7 +20,7 @@ from apygis.cli._common import run_guarded
     help="One JSON object: path, valid, errors, warnings, layers, issues.",
 )
 @run_guarded
-def validate(path: str, driver: str | None, as_json: bool) -> None:
+def validate(path: str, as_json: bool, src: dict) -> None:
     """Check references, numbers and codes of every layer of a map.
 
     Prints one line per finding, or with --json one object whose ``issues``
@@ -28,9 +28,7 @@ def validate(path: str, driver: str | None, as_json: bool) -> None:
     code 0: valid (warnings allowed); 1: errors found (or the file cannot be
     read).
     """
-    import apygis
-
-    m = apygis.read(path, driver=driver)
+    m, _ = read_map(path, src)
     issues = [(ext, issue) for ext in sorted(m.layers) for issue in m.layers[ext].validate()]
     n_err = sum(i.severity == "error" for _, i in issues)
     n_warn = sum(i.severity == "warning" for _, i in issues)

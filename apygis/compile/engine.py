@@ -113,7 +113,7 @@ from apygis.compile.geometry import Geometry
 from apygis.errors import ApygisError, OrientationError
 from apygis.model import topology
 from apygis.model.map import MapFile, check_ext
-from apygis.model.records import APY_CAPACITY
+from apygis.model.records import APY_CAPACITY, TEXT_LEN
 
 __all__ = [
     "GLOBAL_BUTTONS",
@@ -831,6 +831,11 @@ class Engine:
             if not (self._need_mark(out) and self._capacity_ok("texts", out)):
                 return
             self._snapshot()
+            if len(text) > TEXT_LEN:  # APY's text field; the model itself has no limit
+                out.append(
+                    Message(f"a text has at most {TEXT_LEN} characters, {text!r} has {len(text)}")
+                )
+                return
             X, Y, Z = self._marked()
             num = self.layer.add_text(X, Y, Z, text)
             out.append(Added(self.layer_ext, "texts", num))

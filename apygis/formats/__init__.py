@@ -31,11 +31,15 @@ from apygis.errors import ApygisError, DriverError
 
 __all__ = [
     "DRIVER_GROUP",
+    "READ_OPTIONS",
     "Driver",
+    "Option",
     "driver_for",
     "drivers",
     "get_driver",
+    "parse_options",
     "read",
+    "select_layers",
     "verify_set",
     "write",
 ]
@@ -59,6 +63,135 @@ _BUILTIN = {
     "geojson": "apygis.formats.ogr:GEOJSON",
     "fgb": "apygis.formats.ogr:FGB",
 }
+
+
+_TRUE = {"yes", "true", "on", "1"}
+_FALSE = {"no", "false", "off", "0"}
+
+
+@dataclass(frozen=True)
+class Option:
+    """An option a driver's reader (mode ``"r"``) or writer (``"w"``) takes.
+
+    ``name`` is the keyword of the reader or writer function (lower case);
+    on the command line it is ``--co NAME=VALUE`` in any case. ``kind`` is
+    ``"bool"`` (YES/NO, TRUE/FALSE, ON/OFF, 1/0), ``"int"``, ``"float"``,
+    ``"str"`` or ``"choice"`` (one of ``choices``, compared without regard
+    to case); ``low`` and ``high`` bound numbers (inclusive). Options with
+    ``flag`` have a command-line option of their own (``--snap``), which is
+    what messages name.
+    """
+
+    name: str
+    mode: str
+    kind: str
+    help: str
+    choices: tuple[str, ...] = ()
+    low: float | None = None
+    high: float | None = None
+    flag: str | None = None
+
+    def parse(self, text: str, shown: str):
+        """The value of ``text`` (as typed: ``shown`` names it in the message)."""
+        t = text.strip()
+        try:
+            if self.kind == "bool":
+                if t.lower() in _TRUE:
+                    return True
+                if t.lower() in _FALSE:
+                    return False
+                raise ValueError
+            if self.kind == "int":
+                value: object = int(t)
+            elif self.kind == "float":
+                value = float(t)
+                if value != value or value in (float("inf"), float("-inf")):
+                    raise ValueError
+            elif self.kind == "choice":
+                match = [c for c in self.choices if c.lower() == t.lower()]
+                if not match:
+                    raise ValueError
+                return match[0]
+            else:
+                return text
+        except ValueError:
+            raise DriverError(f"{shown}: {self.expects()}, not {text!r}") from None
+        if (self.low is not None and value < self.low) or (  # type: ignore[operator]
+            self.high is not None and value > self.high  # type: ignore[operator]
+        ):
+            raise DriverError(f"{shown}: {self.expects()}, not {text!r}")
+        return value
+
+    def expects(self) -> str:
+        if self.kind == "bool":
+            return "YES or NO expected"
+        if self.kind == "choice":
+            return f"one of {', '.join(self.choices)} expected"
+        what = "a whole number" if self.kind == "int" else "a number"
+        if self.low is not None and self.high is not None:
+            return f"{what} from {self.low:g} to {self.high:g} expected"
+        if self.low is not None:
+            return f"{what} >= {self.low:g} expected"
+        return f"{what} expected"
+
+
+READ_OPTIONS = {
+    "layers": Option(
+        "layers", "r", "str", "source layers to read (a list of names)", flag="--layer"
+    ),
+    "layer_map": Option(
+        "layer_map", "r", "str", "source layer -> map layer (NAME=ext,...)", flag="--layer-map"
+    ),
+    "tolerance_m": Option(
+        "tolerance_m",
+        "r",
+        "float",
+        "distance in metres within which line ends join (topology rebuild)",
+        low=0.0,
+        flag="--snap",
+    ),
+    "crs": Option("crs", "r", "str", "the CRS of data that has none", flag="--src-crs"),
+    "code_field": Option(
+        "code_field", "r", "str", "attribute holding the code 0-99", flag="--code-field"
+    ),
+    "default_code": Option(
+        "default_code",
+        "r",
+        "int",
+        "code of features whose code is missing or not 0-99",
+        low=0,
+        high=99,
+        flag="--default-code",
+    ),
+    "text_field": Option(
+        "text_field", "r", "str", "attribute holding the text of points", flag="--text-field"
+    ),
+    "point_code": Option(
+        "point_code",
+        "r",
+        "int",
+        "code of points without a code or a height (default 90, imported point)",
+        low=0,
+        high=99,
+    ),
+}
+"""The reading options several drivers share (a driver lists those it takes)."""
+
+
+def parse_options(drv: Driver, mode: str, given: dict[str, str], shown=None) -> dict:
+    """``{NAME: "VALUE"}`` as typed (``--co``) to the keywords of ``drv``'s reader or writer.
+
+    Unknown names are refused with the options the driver has. ``shown``
+    maps a name to how the user typed it (default ``--co NAME=VALUE``).
+    """
+    out = {}
+    for name, text in given.items():
+        opt = drv.option(mode, name)
+        where = (shown or {}).get(name, f"--co {name.upper()}={text}")
+        if opt is None:
+            raise DriverError(f"{where}: {drv.no_option(mode, name, cli=True)}")
+        out[opt.name] = opt.parse(text, where)
+    return out
 
 
 @dataclass(frozen=True)
@@ -89,6 +222,11 @@ class Driver:
         files, complete)`` or None, the set stamp and the files a read of
         ``path`` takes (``complete``: all of the set, not one file of it);
         :func:`read` checks them with :func:`apygis.formats._io.verify_set`.
+    options : tuple of Option
+        The keywords its reader and writer take besides ``path`` and
+        ``progress``; :func:`read` and :func:`write` refuse others.
+    stream : bool
+        The writer writes one file that can go to standard output (``-``).
     """
 
     name: str
@@ -99,10 +237,38 @@ class Driver:
     probe: Callable | None = None
     outputs: Callable | None = None
     members: Callable | None = None
+    options: tuple[Option, ...] = ()
+    stream: bool = False
 
     @property
     def modes(self) -> str:
         return ("r" if self.reader else "") + ("w" if self.writer else "")
+
+    def option(self, mode: str, name: str) -> Option | None:
+        """The option ``name`` (any case) of the reader (``"r"``) or writer (``"w"``)."""
+        low = name.lower()
+        return next((o for o in self.options if o.mode == mode and o.name == low), None)
+
+    def no_option(self, mode: str, name: str, cli: bool = False) -> str:
+        """The message for an option ``name`` that the reader or writer does not take.
+
+        ``cli``: the options are listed as typed at the command line (their own
+        flags, else ``--co NAME``), otherwise as the keywords of the function.
+        """
+        verb = "reader" if mode == "r" else "writer"
+        have = [
+            (o.flag or f"--co {o.name.upper()}") if cli else o.name
+            for o in self.options
+            if o.mode == mode
+        ]
+        known = f"it takes {', '.join(have)}" if have else "it takes none"
+        return f"the {self.name} {verb} has no option {name!r} ({known})"
+
+    def check_options(self, mode: str, options: dict) -> None:
+        """Refuse keywords the reader or writer does not declare (``progress`` is always taken)."""
+        for name in options:
+            if name != "progress" and self.option(mode, name) is None:
+                raise DriverError(self.no_option(mode, name))
 
     def function(self, mode: str) -> Callable:
         """The ``reader`` (mode ``"r"``) or ``writer`` (``"w"``); DriverError if it has none.
@@ -207,10 +373,8 @@ def driver_for(path, mode: str) -> Driver:
     if mode == "w" and "apy" in drivers():
         return drivers()["apy"]
     exts = sorted({e for d in candidates for e in d.extensions})
-    raise DriverError(
-        f"{p}: no driver recognises this file; known extensions: {', '.join(exts)} "
-        "(or name one with driver=...)"
-    )
+    what = "is a folder of no known format" if p.is_dir() else "no driver recognises this file"
+    raise DriverError(f"{p}: {what}; known extensions: {', '.join(exts)} (or name a driver)")
 
 
 def _safe_probe(d: Driver, p: Path) -> bool:
@@ -238,10 +402,52 @@ def read(path, driver: str | None = None, **options):
     -------
     MapFile
     """
+    from apygis.formats._report import collecting
+
     drv = get_driver(driver, "r") if driver else driver_for(path, "r")
     log.debug("reading %s with the %s driver", path, drv.name)
+    generic = {k: options.pop(k) for k in ("layers", "crs") if k in options}
+    for k, v in generic.items():
+        if drv.option("r", k) is not None and v is not None:
+            options[k] = v
+    drv.check_options("r", options)
     verify_set(drv, path)
-    return drv.function("r")(os.fspath(path), **options)
+    with collecting() as notes:
+        m = drv.function("r")(os.fspath(path), **options)
+        if generic.get("layers") is not None and "layers" not in options:
+            m = select_layers(m, generic["layers"], path)
+        if generic.get("crs") is not None and "crs" not in options:
+            _assign_crs(m, generic["crs"], path)
+    m.read_warnings = notes
+    return m
+
+
+def select_layers(m, names, path):
+    """``m`` with only the map layers ``names`` (extensions); an unknown name is refused."""
+    from apygis.model.map import check_ext
+
+    wanted = [names] if isinstance(names, str) else list(names)
+    keep = []
+    for n in wanted:
+        ext = n.lower() if isinstance(n, str) else n
+        if ext not in m.layers:
+            have = ", ".join(m.layers) or "none"
+            raise DriverError(f"{path}: no layer {n!r} (its layers: {have})")
+        keep.append(check_ext(ext))
+    for ext in list(m.layers):
+        if ext not in keep:
+            del m.layers[ext]
+    return m
+
+
+def _assign_crs(m, crs, path) -> None:
+    from apygis.formats._report import warn
+    from apygis.model.map import crs_string
+
+    old = crs_string(m.crs)
+    m.crs = crs
+    if old is not None and old != crs_string(m.crs):
+        warn(log, f"{path}: its CRS {old} replaced by {crs_string(m.crs)}", "crs")
 
 
 def verify_set(drv: Driver, path) -> None:
@@ -277,6 +483,7 @@ def write(map, path, driver: str | None = None, **options) -> list[Path]:
     """
     drv = get_driver(driver, "w") if driver else driver_for(path, "w")
     log.debug("writing %s with the %s driver", path, drv.name)
+    drv.check_options("w", options)
     try:
         out = drv.function("w")(map, os.fspath(path), **options)
     except ApygisError:

@@ -7,10 +7,21 @@ digits (0-9999), codes in 2, texts in 24 characters of ISO 8859-1.
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from apygis.errors import CapacityError, ValueRangeError
-from apygis.model.records import APY_CAPACITY, APY_MAX_NUM, NO_REF, REF_FIELDS, TABLE_WORDS
+from apygis.model.records import (
+    APY_CAPACITY,
+    APY_MAX_NUM,
+    NO_REF,
+    REF_FIELDS,
+    TABLE_WORDS,
+    TEXT_LEN,
+)
+
+log = logging.getLogger("apygis.formats.apy")
 
 __all__ = [
     "MAX_XY_CM",
@@ -18,6 +29,7 @@ __all__ = [
     "check_layer_for_apy",
     "cm_to_m",
     "encode_latin1",
+    "fit_texts",
     "m_to_cm",
 ]
 
@@ -109,6 +121,13 @@ def check_layer_for_apy(layer, path=None) -> None:
                 )
         if table == "texts":
             for i, s in enumerate(t["text"]):
+                if len(s) > TEXT_LEN:
+                    raise ValueRangeError(
+                        f"layer {layer.ext}: text {t['num'][i]} ({s!r}) has {len(s)} characters; "
+                        f"APY holds {TEXT_LEN} (the writer option CUT_TEXTS=YES cuts longer "
+                        "texts)",
+                        path=path,
+                    )
                 try:
                     s.encode("latin-1")
                 except UnicodeEncodeError:
@@ -117,6 +136,51 @@ def check_layer_for_apy(layer, path=None) -> None:
                         "ISO 8859-1, which the APY format stores",
                         path=path,
                     ) from None
+
+
+def fit_texts(map_, path=None, cut_texts: bool = False):
+    """``map_`` when every text fits APY's 24 characters; else refused, or cut.
+
+    The model keeps texts of any length; the APY native formats hold
+    :data:`~apygis.model.records.TEXT_LEN` characters. A longer text is a
+    :class:`~apygis.errors.ValueRangeError` naming it (and how many more),
+    unless ``cut_texts``: then a copy of the map whose texts are cut to 24
+    characters is returned and a warning says how many were cut.
+    """
+    long = [
+        (lay.ext, int(n), t)
+        for lay in map_
+        for n, t in zip(lay.texts["num"].tolist(), lay.texts["text"].tolist(), strict=True)
+        if len(t) > TEXT_LEN
+    ]
+    if not long:
+        return map_
+    ext, num, text = long[0]
+    more = f" (and {len(long) - 1} more)" if len(long) > 1 else ""
+    if not cut_texts:
+        raise ValueRangeError(
+            f"layer {ext}: text {num} ({text!r}) has {len(text)} characters; APY holds "
+            f"{TEXT_LEN}{more} (the writer option CUT_TEXTS=YES cuts longer texts)",
+            path=path,
+        )
+    out = map_.copy()
+    for lay in out:
+        tx = lay.texts
+        if len(tx) and any(len(t) > TEXT_LEN for t in tx["text"].tolist()):
+            rows = tx.copy()
+            rows["text"] = [t[:TEXT_LEN] for t in tx["text"].tolist()]
+            out.add_layer(type(lay).from_arrays(lay.ext, lay.symbols, lay.line_points, rows))
+    log.warning(
+        "%s: %d texts longer than %d characters cut (first: layer %s, text %d, %r -> %r)",
+        path,
+        len(long),
+        TEXT_LEN,
+        ext,
+        num,
+        text,
+        text[:TEXT_LEN],
+    )
+    return out
 
 
 def _where(path) -> str:

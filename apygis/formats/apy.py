@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from apygis.errors import DriverError, FormatError
-from apygis.formats import Driver
+from apygis.formats import Driver, Option
 from apygis.formats._apycommon import (
     MAX_XY_CM,
     MAX_Z_CM,
@@ -38,6 +38,7 @@ from apygis.formats._apycommon import (
     cm_to_m,
     decode_latin1,
     encode_latin1,
+    fit_texts,
     m_to_cm,
 )
 from apygis.formats._io import (
@@ -411,11 +412,14 @@ def read(path, progress=None) -> MapFile:
     return m
 
 
-def write(map_: MapFile, path, progress=None) -> list[Path]:
+def write(map_: MapFile, path, progress=None, cut_texts: bool = False) -> list[Path]:
     """Write the map's layers as APY layer files, atomically; returns the files written.
 
-    All layers are checked (capacity, digits) before any file is written.
+    All layers are checked (capacity, digits, texts of at most 24
+    characters) before any file is written; ``cut_texts`` cuts longer texts
+    to 24 characters (with a warning) instead of refusing them.
     """
+    map_ = fit_texts(map_, path, cut_texts)
     base, layers, whole = _split_target(map_, path)
     if not layers:
         raise DriverError(f"{path}: map {map_.id} has no layers: nothing to write")
@@ -447,4 +451,5 @@ DRIVER = Driver(
     probe=probe,
     outputs=outputs,
     members=members,
+    options=(Option("cut_texts", "w", "bool", "cut texts to APY's 24 characters"),),
 )

@@ -59,7 +59,7 @@ from typing import NoReturn
 import numpy as np
 
 from apygis.errors import DriverError, FormatError, RecordError, ValueRangeError
-from apygis.formats import Driver
+from apygis.formats import READ_OPTIONS, Driver, Option
 from apygis.formats._io import (
     atomic_write_many,
     check_resolution,
@@ -68,11 +68,13 @@ from apygis.formats._io import (
     stamp_path,
 )
 from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows
+from apygis.formats._report import warn
 from apygis.formats._text import digit_columns, esri_wkt, put_right
 from apygis.model import topology
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text
 from apygis.model.polylines import export_lines, to_csr
 from apygis.model.records import MAX_CODE
+from apygis.model.symbols import IMPORTED_POINT, SPOT_HEIGHT
 
 __all__ = [
     "DEFAULT_LAYER",
@@ -838,22 +840,32 @@ class _Attributes:
         """Row of each ID (-1 where the table has none; logged)."""
         rows = topology.lookup(self.ids, ids)
         if (rows < 0).any():
-            log.warning(
-                "%s: no attributes for ID %s; defaults used",
-                self.path,
-                ids[rows < 0][:5].tolist(),
+            warn(
+                log,
+                f"{self.path}: no attributes for ID {ids[rows < 0][:5].tolist()}; defaults used",
+                "skipped",
+                int((rows < 0).sum()),
+                "attributes",
             )
         return rows
 
 
 def _unique_nums(ids: np.ndarray, path, what: str) -> np.ndarray:
     if len(ids) and (ids.min() < 0 or len(np.unique(ids)) != len(ids)):
-        log.warning("%s: %s IDs are negative or repeated; numbered 1..%d", path, what, len(ids))
+        warn(
+            log,
+            f"{path}: {what} IDs are negative or repeated; numbered 1..{len(ids)}",
+            "renumbered",
+            len(ids),
+            what,
+        )
         return np.arange(1, len(ids) + 1, dtype=np.int64)
     return ids
 
 
-def _points_to_layer(layer, d: dict, kind: str, table, gen_path, code: int) -> None:
+def _points_to_layer(
+    layer, d: dict, kind: str, table, gen_path, code: int | None, point_code: int
+) -> None:
     ids, xyz = d["ids"], d["xyz"]
     rows = table.rows_for(ids) if table is not None else np.full(len(ids), -1)
     have = np.flatnonzero(rows >= 0)
@@ -862,7 +874,10 @@ def _points_to_layer(layer, d: dict, kind: str, table, gen_path, code: int) -> N
     if table is not None and d["dims"] == 2 and (kind == "texts" or table.has("HEIGHT")):
         xyz[have, 2] = table.reals("HEIGHT", rows[have])
     if kind == "symbols":
-        codes = np.full(len(ids), code, np.int64)
+        if code is not None:
+            codes = np.full(len(ids), code, np.int64)
+        else:  # a height makes a spot height (00), else an imported point
+            codes = np.where(xyz[:, 2] != 0, SPOT_HEIGHT, point_code).astype(np.int64)
         if table is not None:
             codes[have] = table.ints("CODE", 0, MAX_CODE, rows[have])
         layer.add_symbols(xyz, codes, nums)
@@ -879,8 +894,8 @@ def _points_to_layer(layer, d: dict, kind: str, table, gen_path, code: int) -> N
     layer.add_texts(xyz, out, nums)
 
 
-def _line_codes(d: dict, table, code: int) -> list[int]:
-    codes = np.full(len(d["ids"]), code, np.int64)
+def _line_codes(d: dict, table, code: int | None) -> list[int]:
+    codes = np.full(len(d["ids"]), 0 if code is None else code, np.int64)
     if table is not None:
         rows = table.rows_for(d["ids"])
         have = np.flatnonzero(rows >= 0)
@@ -894,8 +909,11 @@ def _add_lines(layer: Layer, lines: list[np.ndarray], codes, closed, tol: float,
         return
     coords, offsets = to_csr(lines)
     rep = layer.add_polylines(coords, offsets, codes, closed, snap_m=tol, crs=crs)
-    say = log.warning if rep.refused or rep.duplicates_removed or rep.empty else log.info
-    say("%s: layer %s: lines rebuilt: %s", path, layer.ext, rep.message())
+    text = f"{path}: layer {layer.ext}: lines rebuilt: {rep.message()}"
+    if rep.refused or rep.duplicates_removed or rep.empty:
+        warn(log, text, "rebuilt", None, "lines")
+    else:
+        log.info("%s", text)
 
 
 def _lines_of(d: dict) -> list[np.ndarray]:
@@ -918,7 +936,7 @@ def _read_prj(path: Path):
     try:
         return CRS.from_user_input(text)
     except CRSError as exc:
-        log.warning("%s: not a readable CRS (%s); the map has none", path, exc)
+        warn(log, f"{path}: not a readable CRS ({exc}); the map has none", "crs")
         return None
 
 
@@ -941,7 +959,9 @@ def _check_kind(d: dict, kind: str, path: Path) -> None:
         )
 
 
-def _read_single(p: Path, layer: str | None, tol: float, code: int) -> MapFile:
+def _read_single(
+    p: Path, layer: str | None, tol: float, code: int | None, point_code: int, crs
+) -> MapFile:
     d = decode_file(read_bytes(p), p)
     member = _SET_NAME_RE.match(p.name)
     map_name, ext, kind = p.stem, None, None
@@ -956,7 +976,9 @@ def _read_single(p: Path, layer: str | None, tol: float, code: int) -> MapFile:
     if member is None and kind == "symbols" and table is not None and table.has("TEXT"):
         kind = "texts"
     _check_kind(d, kind, p)
-    mp = MapFile(_map_name(map_name), crs=_read_prj(p.with_suffix(".prj")))
+    mp = MapFile(
+        _map_name(map_name), crs=crs if crs is not None else _read_prj(p.with_suffix(".prj"))
+    )
     lay = mp.layer(ext)
     if d["kind"] == "empty":
         return mp
@@ -965,13 +987,17 @@ def _read_single(p: Path, layer: str | None, tol: float, code: int) -> MapFile:
         codes = _line_codes(d, table, code)
         _add_lines(lay, lines, codes, [kind == "polygons"] * len(lines), tol, mp.crs, p)
     else:
-        _points_to_layer(lay, d, kind, table, p, code)
+        _points_to_layer(lay, d, kind, table, p, code, point_code)
     return mp
 
 
-def _read_set(p: Path, members: dict, tol: float, code: int, progress) -> MapFile:
+def _read_set(
+    p: Path, members: dict, tol: float, code: int | None, point_code: int, crs, progress
+) -> MapFile:
     base = p.with_suffix("") if p.suffix.lower() == ".gen" else p
-    mp = MapFile(_map_name(base.name), crs=_read_prj(base.with_name(base.name + ".prj")))
+    if crs is None:
+        crs = _read_prj(base.with_name(base.name + ".prj"))
+    mp = MapFile(_map_name(base.name), crs=crs)
     exts = sorted({ext for ext, _ in members})
     done = 0
     for ext in exts:
@@ -986,7 +1012,7 @@ def _read_set(p: Path, members: dict, tol: float, code: int, progress) -> MapFil
             csv_path = f.with_suffix(".csv")
             table = _Attributes(csv_path) if csv_path.is_file() else None
             if table is None:
-                log.warning("%s: no attribute table %s; default codes", f, csv_path.name)
+                warn(log, f"{f}: no attribute table {csv_path.name}; default codes", "skipped")
             if d["kind"] == "empty":
                 pass
             elif kind in ("lines", "polygons"):
@@ -995,7 +1021,8 @@ def _read_set(p: Path, members: dict, tol: float, code: int, progress) -> MapFil
                 all_codes += _line_codes(d, table, code)
                 all_closed += [kind == "polygons"] * len(lines)
             else:
-                _points_to_layer(lay, d, "symbols" if kind == "points" else kind, table, f, code)
+                kind_ = "symbols" if kind == "points" else kind
+                _points_to_layer(lay, d, kind_, table, f, code, point_code)
             done += 1
             if progress:
                 progress(done, len(members))
@@ -1018,7 +1045,9 @@ def read(
     progress=None,
     tolerance_m: float = 0.005,
     layer: str | None = None,
-    code: int = 0,
+    default_code: int | None = None,
+    point_code: int = IMPORTED_POINT,
+    crs=None,
 ) -> MapFile:
     """Read a GENERATE file, or a whole set written by :func:`write`.
 
@@ -1034,19 +1063,28 @@ def read(
     layer : str, optional
         Layer extension for a single file (default: from a set member's
         name, else ``"a"``).
-    code : int
-        Code (0-99) of records that no attribute table describes.
+    default_code : int or None
+        Code (0-99) of records that no attribute table describes. None:
+        lines 00; points 00 (spot height) where they have a height (a 3-D
+        file, Z not 0), else ``point_code``.
+    point_code : int
+        Code of points without a code or a height (default 90, imported point).
+    crs : optional
+        The CRS (GENERATE has none; a ``.prj`` beside the file is read otherwise).
 
     Returns
     -------
     MapFile
     """
     tol = _check_tol(tolerance_m)
-    if isinstance(code, bool) or not isinstance(code, int) or not 0 <= code <= MAX_CODE:
-        raise DriverError(f"code is an integer from 0 to {MAX_CODE}, not {code!r}")
+    for name, value in (("default_code", default_code), ("point_code", point_code)):
+        if value is None and name == "default_code":
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_CODE:
+            raise DriverError(f"{name} is an integer from 0 to {MAX_CODE}, not {value!r}")
     p = Path(path)
     if p.is_file():
-        mp = _read_single(p, layer, tol, code)
+        mp = _read_single(p, layer, tol, default_code, point_code, crs)
         if progress:
             progress(1, 1)
         return mp
@@ -1055,7 +1093,7 @@ def read(
         raise FormatError("no such file, nor a GENERATE file set NAME_<ext>_<kind>.gen", path=p)
     if layer:
         raise DriverError(f"{p}: names a file set; layer= applies to a single file")
-    return _read_set(p, members, tol, code, progress)
+    return _read_set(p, members, tol, default_code, point_code, crs, progress)
 
 
 def probe(path) -> bool:
@@ -1097,4 +1135,10 @@ DRIVER = Driver(
     probe=probe,
     outputs=outputs,
     members=members,
+    options=(
+        *(READ_OPTIONS[k] for k in ("tolerance_m", "crs", "default_code", "point_code")),
+        Option("layer", "r", "str", "map layer of a single GENERATE file (default a)"),
+        Option("dims", "w", "int", "coordinates written: 3 (X, Y, Z) or 2 (X, Y)", low=2, high=3),
+        Option("decimals", "w", "int", "decimals of coordinates", low=0, high=15),
+    ),
 )

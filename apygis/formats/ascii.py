@@ -31,13 +31,20 @@ from typing import Any, NoReturn
 import numpy as np
 
 from apygis.errors import FormatError
-from apygis.formats import Driver
-from apygis.formats._apycommon import check_layer_for_apy, cm_to_m, m_to_cm
+from apygis.formats import Driver, Option
+from apygis.formats._apycommon import check_layer_for_apy, cm_to_m, fit_texts, m_to_cm
 from apygis.formats._io import atomic_write_many, check_resolution, read_bytes
 from apygis.formats._readguard import ascii_int, check_coords
 from apygis.formats._text import digit_columns, put_right
 from apygis.model.map import Layer, MapFile, check_ext, check_map_id, check_text, crs_string
-from apygis.model.records import LINE_DTYPE, NO_REF, REF_FIELDS, SYMBOL_DTYPE, TEXT_DTYPE
+from apygis.model.records import (
+    LINE_DTYPE,
+    NO_REF,
+    REF_FIELDS,
+    SYMBOL_DTYPE,
+    TEXT_DTYPE,
+    TEXT_LEN,
+)
 
 __all__ = ["DRIVER", "read", "write"]
 
@@ -328,6 +335,8 @@ def decode(data: bytes, path=None) -> MapFile:
     if data.startswith(b"\xef\xbb\xbf"):
         rd.pos = 3
     first = rd.next_line()
+    if first is None:
+        raise FormatError(f"the file is empty: not an APY ASCII file (it begins {MAGIC!r})", path)
     if first != MAGIC:
         rd.fail(f"not an APY ASCII file: the first line must be {MAGIC!r}")
     header: dict[str, Any] = {"id": None, "scale": None, "crs": None, "notes": []}
@@ -436,8 +445,15 @@ def _read_texts(rd: _Reader, n: int) -> np.ndarray:
             text = check_text(line[TEXT_COL:])
         except ValueError as exc:
             rd.fail(str(exc))
+        if len(text) > TEXT_LEN:
+            rd.fail(
+                f"a text has at most {TEXT_LEN} characters in APY ASCII, {text!r} has {len(text)}"
+            )
         rows.append((row["num"], row["x"], row["y"], row["z"], text))
-    return np.array(rows, dtype=TEXT_DTYPE) if rows else np.zeros(0, TEXT_DTYPE)
+    out = np.zeros(len(rows), TEXT_DTYPE)
+    for k, r in enumerate(rows):
+        out[k] = r
+    return out
 
 
 # --------------------------------------------------------------------------- API
@@ -460,12 +476,14 @@ def read(path, progress=None) -> MapFile:
     return m
 
 
-def write(map_: MapFile, path, progress=None) -> list:
+def write(map_: MapFile, path, progress=None, cut_texts: bool = False) -> list:
     """Write a map as APY ASCII, atomically.
 
     A map whose CRS unit makes centimetres of a unit coarser than 1 cm (degrees)
-    is refused: the format stores hundredths of a unit.
+    is refused: the format stores hundredths of a unit. Texts longer than 24
+    characters are refused, or with ``cut_texts`` cut (with a warning).
     """
+    map_ = fit_texts(map_, path, cut_texts)
     check_resolution(map_, path, 0.01, "APY ASCII stores coordinates in hundredths of a unit")
     from pathlib import Path
 
@@ -482,4 +500,6 @@ DRIVER = Driver(
     reader=read,
     writer=write,
     probe=probe,
+    stream=True,
+    options=(Option("cut_texts", "w", "bool", "cut texts to APY's 24 characters"),),
 )

@@ -10,11 +10,8 @@
 from __future__ import annotations
 
 import glob
-import inspect
 import logging
-import os
 from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,13 +25,18 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class Result:
-    """What happened to one source: the files written, or why it failed."""
+    """What happened to one source: the files written, or why it failed.
+
+    ``warnings`` are the reader's messages about the source (entities
+    skipped, records renumbered: :mod:`apygis.formats._report`).
+    """
 
     source: str
     outputs: list[str] = field(default_factory=list)
     records: int = 0
     layers: int = 0
     error: str | None = None
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -66,22 +68,11 @@ def output_name(source: str, to_driver: str) -> str:
     """
     from apygis.formats import drivers, get_driver
 
-    p = Path(source)
+    p = Path(source.rstrip("/\\") or source)
     known = {e for d in drivers().values() for e in d.extensions}
     base = p.stem if p.suffix[1:].lower() in known else p.name
     exts = get_driver(to_driver).extensions
     return f"{base}.{exts[0]}" if exts else base
-
-
-def _accepted(func: Callable, options: dict) -> dict:
-    """The options a driver function takes (others are dropped with a debug note)."""
-    params = inspect.signature(func).parameters
-    if any(p.kind is p.VAR_KEYWORD for p in params.values()):
-        return dict(options)
-    kept = {k: v for k, v in options.items() if k in params}
-    for k in set(options) - set(kept):
-        log.debug("%s does not take the option %s", func.__qualname__, k)
-    return kept
 
 
 def convert_file(
@@ -93,17 +84,20 @@ def convert_file(
     overwrite: bool = False,
     to_crs=None,
     read_options: dict | None = None,
+    write_options: dict | None = None,
     progress: Progress | None = None,
 ) -> Result:
     """Convert one file; errors a user can cause come back in ``Result.error``.
 
+    ``read_options`` and ``write_options`` go to the reader and the writer;
+    one they do not take is an error (``Result.error``), never dropped.
     ``progress(done, total)`` (:mod:`apygis.progress`) with ``total``
     :data:`~apygis.progress.STEPS`: reading is the first half, writing the
     second (as far as the drivers report progress); the last call, on
     success, is ``(STEPS, STEPS)``.
     """
     import apygis
-    from apygis.formats import driver_for, get_driver, verify_set
+    from apygis.formats import driver_for, get_driver
 
     def step(index):
         cb = phase(progress, index, 2)
@@ -112,15 +106,21 @@ def convert_file(
     writing = False
     try:
         in_drv = get_driver(src_driver, "r") if src_driver else driver_for(src, "r")
-        opts = {**(read_options or {}), **step(0)}
-        verify_set(in_drv, src)  # a set half-replaced by an interrupted write is refused
-        reader = in_drv.function("r")
-        m = reader(os.fspath(src), **_accepted(reader, opts))
+        m = apygis.read(src, driver=in_drv.name, **(read_options or {}), **step(0))
+        notes = [w.message for w in m.read_warnings]
         if to_crs is not None:
+            from apygis.errors import CRSError
             from apygis.model.reproject import reproject
+
+            if m.crs is None:
+                raise CRSError(
+                    f"{src}: the map has no CRS, so it cannot be reprojected to {to_crs} "
+                    "(assign its CRS with --src-crs)"
+                )
 
             m = reproject(m, to_crs)
         out_drv = get_driver(driver, "w") if driver else driver_for(dst, "w")
+        out_drv.check_options("w", write_options or {})
         if not overwrite:
             existing = [str(p) for p in out_drv.targets(m, dst) if p.exists()]
             if existing:
@@ -136,12 +136,16 @@ def convert_file(
                 verb = "exists" if len(existing) == 1 else "exist"
                 raise FileOverwriteError(f"{what} {verb}; use --overwrite")
         writing = True
-        written = apygis.write(
-            m, dst, driver=out_drv.name, **_accepted(out_drv.function("w"), step(1))
-        )
+        written = apygis.write(m, dst, driver=out_drv.name, **(write_options or {}), **step(1))
         if progress is not None:
             progress(STEPS, STEPS)
-        return Result(src, [str(p) for p in written], sum(len(lay) for lay in m), len(m.layers))
+        return Result(
+            src,
+            [str(p) for p in written],
+            sum(len(lay) for lay in m),
+            len(m.layers),
+            warnings=notes,
+        )
     except ApygisError as exc:
         return Result(src, error=str(exc))
     except OSError as exc:  # name the file the error is about: the target once writing
@@ -153,12 +157,23 @@ def convert_file(
         return Result(src, error=f"{exc.filename or src}: cannot read: {reason}")
 
 
+def _convert_task(src: str, dst: str, kwargs: dict) -> Result:
+    """One conversion as a task of :class:`apygis.tasks.Runner` (a worker process or node).
+
+    The worker logs nothing itself: what the reader reported comes back in
+    ``Result.warnings``, which the caller reports with the file.
+    """
+    logging.getLogger("apygis").setLevel(logging.ERROR)
+    return convert_file(src, dst, **kwargs)
+
+
 def convert_many(
     sources: Iterable[str],
     outdir,
     to_driver: str,
     *,
     jobs: int = 1,
+    scheduler: str | None = None,
     progress: Progress | None = None,
     on_result: Callable[[Result], None] | None = None,
     **kwargs,
@@ -174,7 +189,12 @@ def convert_many(
     to_driver : str
         Output driver name.
     jobs : int
-        Worker processes (1: convert in this process).
+        Local worker processes (1: convert in this process).
+    scheduler : str, optional
+        A Dask scheduler address (``tcp://host:8786``): the conversions run on
+        that cluster, through :class:`apygis.tasks.Runner` as the
+        aerotriangulation's tasks do; its workers must see the files under the
+        same paths. ``jobs`` is then ignored.
     progress : Progress, optional
         ``progress(done, total)`` as each source is finished, ``total`` the
         number of sources (:mod:`apygis.progress`).
@@ -182,13 +202,16 @@ def convert_many(
         Called with each :class:`Result` as it completes (before ``progress``).
     **kwargs
         Passed to :func:`convert_file` (``overwrite``, ``src_driver``,
-        ``to_crs``, ``read_options``).
+        ``to_crs``, ``read_options``, ``write_options``).
 
     Returns
     -------
-    list of Result, in the order of ``sources``.
+    list of Result, in the order of ``sources``. Two sources that would give
+    the same output name are not both written (the second fails, naming the
+    first), and an existing output is not replaced without ``overwrite``.
     """
     from apygis.formats import get_driver
+    from apygis.tasks import Runner
 
     get_driver(to_driver, "w")  # fail early on a bad name
     outdir = Path(outdir)
@@ -213,20 +236,16 @@ def convert_many(
         targets[name] = src
         plan.append((i, src, str(outdir / name)))
 
-    if jobs <= 1 or len(plan) <= 1:
+    kw = {**kwargs, "driver": to_driver}
+    if scheduler is None and (jobs <= 1 or len(plan) <= 1):
         for i, src, dst in plan:
-            done(i, convert_file(src, dst, driver=to_driver, **kwargs))
-    else:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futs = {
-                pool.submit(convert_file, src, dst, driver=to_driver, **kwargs): (i, src)
-                for i, src, dst in plan
-            }
-            for fut in as_completed(futs):
-                i, src = futs[fut]
-                try:
-                    res = fut.result()
-                except Exception as exc:  # a worker died: report, go on with the others
-                    res = Result(src, error=f"{type(exc).__name__}: {exc}")
-                done(i, res)
+            done(i, convert_file(src, dst, **kw))
+        return [results[i] for i in range(len(sources))]
+    runner = Runner(scheduler or "processes", workers=None if scheduler else jobs)
+    with runner:
+        tasks = [(i, (src, dst, kw)) for i, src, dst in plan]
+        for i, res in runner.run(_convert_task, tasks, return_exceptions=True):
+            if isinstance(res, BaseException):  # a worker died: report, go on with the others
+                res = Result(sources[i], error=f"{type(res).__name__}: {res}")
+            done(i, res)
     return [results[i] for i in range(len(sources))]

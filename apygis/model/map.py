@@ -55,7 +55,6 @@ from apygis.model.records import (
     SYMBOL_DTYPE,
     TABLES,
     TEXT_DTYPE,
-    TEXT_LEN,
     Table,
     next_numbers,
 )
@@ -164,14 +163,24 @@ def check_encodable(value: str, what: str) -> str:
 
 
 def check_text(text) -> str:
-    """A text: a string of at most 24 characters, no control characters, encodable."""
+    """A text: a string without control characters that can be encoded.
+
+    The model keeps texts of any length; only the APY native formats hold
+    at most :data:`~apygis.model.records.TEXT_LEN` (24) characters, and
+    their writers refuse (or, asked to, cut) longer ones.
+    """
     if not isinstance(text, str):
         raise RecordError(f"a text is a string, not {text!r}")
-    if len(text) > TEXT_LEN:
-        raise RecordError(f"a text has at most {TEXT_LEN} characters, {text!r} has {len(text)}")
     if any(ord(c) < 32 or 127 <= ord(c) < 160 for c in text):
         raise RecordError(f"a text may not contain control characters: {text!r}")
     return check_encodable(text, "a text")
+
+
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+
+def _has_surrogate(text: str) -> bool:
+    return _SURROGATE.search(text) is not None
 
 
 def _linked(lp: np.ndarray, i: int, j: int) -> bool:
@@ -251,14 +260,18 @@ def _check_table(name: str, t: np.ndarray) -> None:
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
             raise RecordError(
-                f"{what} {t['num'][k]}: {axis.upper()} {t[axis][k]!r} is not finite or exceeds "
-                f"{MAX_COORD:g} in magnitude"
+                f"{what} {t['num'][k]}: {axis.upper()} {float(t[axis][k])!r} is not finite or "
+                f"exceeds {MAX_COORD:g} in magnitude"
             )
     if "code" in names and len(t) and not 0 <= t["code"].min() <= t["code"].max() <= MAX_CODE:
         bad = (t["code"] < 0) | (t["code"] > MAX_CODE)
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
             raise RecordError(f"{what} {t['num'][k]}: code {t['code'][k]} is outside 0-{MAX_CODE}")
+    if "text" in names:
+        for k, tx in enumerate(t["text"].tolist()):
+            if not isinstance(tx, str):
+                raise RecordError(f"{what} {t['num'][k]}: a text is a string, not {tx!r}")
 
 
 def _as_records(records, dtype: np.dtype, what: str) -> np.ndarray:
@@ -361,7 +374,7 @@ class Layer:
         return num
 
     def add_text(self, x: float, y: float, z: float, text: str) -> int:
-        """Add a text (at most 24 characters) at a position and return its point number."""
+        """Add a text (any length, no control characters) and return its point number."""
         x, y, z = _check_xyz(x, y, z)
         text = check_text(text)
         t = self._tables["texts"]
@@ -448,8 +461,8 @@ class Layer:
     def add_texts(self, xyz, texts, nums=None) -> np.ndarray:
         """Add many texts at once and return their point numbers.
 
-        ``texts`` are one string each (:func:`check_text`: at most 24
-        characters, no control characters, encodable); ``xyz`` and ``nums``
+        ``texts`` are one string each (:func:`check_text`: no control
+        characters, encodable; any length); ``xyz`` and ``nums``
         as for :meth:`add_symbols`. Nothing is added unless all are valid.
         """
         pts = _check_bulk_xyz(xyz, "text")
@@ -752,8 +765,7 @@ class Layer:
         issues += topology.validate_numbers("texts", self.texts["num"])
         issues += topology.validate_line_points(self.line_points)
         tx = self.texts
-        codes = np.ascontiguousarray(tx["text"]).view(np.uint32).reshape(len(tx), TEXT_LEN)
-        bad = ((codes >= 0xD800) & (codes <= 0xDFFF)).any(axis=1)
+        bad = np.array([_has_surrogate(t) for t in tx["text"].tolist()], dtype=bool).reshape(-1)
         issues += [
             topology.Issue(
                 "error",
@@ -832,6 +844,13 @@ class MapFile:
         The ground coordinate reference system.
     notes : str
         Free notes.
+
+    Attributes
+    ----------
+    read_warnings : list
+        What the reader that made this map reported about its file (skipped
+        entities, records numbered anew, ...): ``apygis.formats`` fills it
+        with its ``ReadWarning`` records. Not part of the map's equality.
     """
 
     def __init__(self, id: str, scale: int | None = None, crs=None, notes: str = ""):
@@ -840,6 +859,7 @@ class MapFile:
         self.crs = crs
         self.notes = notes
         self.layers: dict[str, Layer] = {}
+        self.read_warnings: list = []
 
     @property
     def scale(self) -> int | None:

@@ -13,7 +13,9 @@ line       num, x, y, z, code,         point number, position, line code 0-99,
 points     fwd, back, side1, side2     references (point numbers) to the next and
                                        previous point of the line and to up to two
                                        branch points; ``NO_REF`` (-1) where none
-texts      num, x, y, z, text          point number, position, text (<= 24 chars)
+texts      num, x, y, z, text          point number, position, text (a Python str
+                                       of any length: the model has no limit;
+                                       the APY native formats hold 24 characters)
 ========== =========================== =========================================
 
 Point numbers are unique within a table (the symbols, the line points and the
@@ -54,6 +56,7 @@ MAX_COORD = 1e12
 The model and every reader refuse larger (and non-finite) coordinates: past
 it, float64 no longer resolves a millimetre, and no map needs it."""
 TEXT_LEN = 24
+"""Characters of a text that APY (and its native formats) hold; the model has no limit."""
 APY_MAX_NUM = 9999
 """Largest point number the APY native format stores (4 digits)."""
 
@@ -76,9 +79,8 @@ LINE_DTYPE = np.dtype(
         ("side2", "i8"),
     ]
 )
-TEXT_DTYPE = np.dtype(
-    [("num", "i8"), ("x", "f8"), ("y", "f8"), ("z", "f8"), ("text", f"U{TEXT_LEN}")]
-)
+TEXT_DTYPE = np.dtype([("num", "i8"), ("x", "f8"), ("y", "f8"), ("z", "f8"), ("text", "O")])
+"""The texts table; ``text`` holds Python ``str`` objects (no length limit, nothing cut)."""
 
 TABLES = {"symbols": SYMBOL_DTYPE, "line_points": LINE_DTYPE, "texts": TEXT_DTYPE}
 TABLE_WORDS = {"symbols": "symbol", "line_points": "line point", "texts": "text"}

@@ -88,8 +88,8 @@ def reproject(map_: MapFile, to_crs) -> MapFile:
 
     if map_.crs is None:
         raise CRSError(
-            f"map {map_.id} has no CRS: set one (MapFile.crs) before reprojecting to "
-            f"{crs_string(_crs(to_crs, 'target CRS'))}"
+            f"map {map_.id} has no CRS: it cannot be reprojected to "
+            f"{crs_string(_crs(to_crs, 'target CRS'))} (give it its CRS first)"
         )
     src = map_.crs
     dst = _crs(to_crs, "target CRS")

@@ -24,7 +24,11 @@ def _extent(ext):
 
 
 def summarize(m: MapFile) -> dict:
-    """Counts, APY capacity used, extents and validation findings of a map.
+    """Counts, APY capacity used, extents, validation findings and read warnings of a map.
+
+    ``warnings`` counts the validation warnings and the reader's warnings
+    (``MapFile.read_warnings``: entities skipped, records renumbered, ...),
+    which ``read_warnings`` lists (``kind``, ``what``, ``count``, ``message``).
 
     >>> m = MapFile("T1", scale=5000)
     >>> _ = m.layer("r").add_line([(0, 0, 0), (10, 0, 0)], code=3)
@@ -70,6 +74,7 @@ def summarize(m: MapFile) -> dict:
     if extents:
         a = np.array(extents)
         overall = _extent((*a[:, :3].min(axis=0).tolist(), *a[:, 3:].max(axis=0).tolist()))
+    read = [w.as_dict() if hasattr(w, "as_dict") else dict(w) for w in m.read_warnings]
     return {
         "id": m.id,
         "scale": m.scale,
@@ -81,5 +86,6 @@ def summarize(m: MapFile) -> dict:
         "extent": overall,
         "valid": n_err == 0,
         "errors": n_err,
-        "warnings": n_warn,
+        "warnings": n_warn + len(read),
+        "read_warnings": read,
     }

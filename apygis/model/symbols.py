@@ -56,6 +56,7 @@ __all__ = [
     "ENV_VAR",
     "FREE_NAME",
     "HEADER",
+    "IMPORTED_POINT",
     "MAX_NAME_LENGTH",
     "NCODES",
     "SIZE",
@@ -303,6 +304,9 @@ class Symbol:
 
 #: The reserved code of the spot height.
 SPOT_HEIGHT = 0
+IMPORTED_POINT = 90
+"""The code of a point read from another program's file that says nothing more of it
+(no code, no height): "imported point" in the default library (a small ring)."""
 SPOT_HEIGHT_SYMBOL = Symbol(SPOT_HEIGHT, _SPOT_HEIGHT_NAME, _spot_height_bitmap())
 
 

@@ -36,7 +36,23 @@ def test_formats_lists_drivers_with_modes(run):
         "modes": "rw",
         "extensions": ["apa"],
         "description": d["ascii"]["description"],
+        "stdout": True,
+        "options": [
+            {
+                "name": "CUT_TEXTS",
+                "mode": "w",
+                "kind": "bool",
+                "choices": [],
+                "flag": None,
+                "help": "cut texts to APY's 24 characters",
+            }
+        ],
     }
+    assert d["gpkg"]["stdout"] is False
+    assert {o["name"] for o in d["dxf"]["options"]} >= {"CHORD_M", "POINT_CODE", "VERSION"}
+    text = run("formats", "--options").output
+    assert "--co VERSION=R2010|R2013|R2018" in text
+    assert "--code-field" in text
 
 
 def test_info_json_matches_what_the_sample_script_made(run, sample_dir):

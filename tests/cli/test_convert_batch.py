@@ -42,8 +42,9 @@ def test_batch_with_jobs_reports_the_failure_and_converts_the_rest(sample_dir, t
 
 def test_batch_refuses_to_overwrite_then_overwrites(sample_dir, tmp_path):
     out = tmp_path / "out"
-    assert _run("convert", "--to", "ascii", sample_dir / "ZH1091", out).exit_code == 0
-    res = _run("convert", "--to", "ascii", sample_dir / "ZH1091", out)
+    folder = f"{out}/"  # a trailing slash: a folder that receives SRC under its own name
+    assert _run("convert", "--to", "ascii", sample_dir / "ZH1091", folder).exit_code == 0
+    res = _run("convert", "--to", "ascii", sample_dir / "ZH1091", folder)
     assert res.exit_code == 1
     assert "exists; use --overwrite" in res.output
     res = _run("convert", "--to", "ascii", "--overwrite", sample_dir / "ZH1091", out)

@@ -65,8 +65,8 @@ def _start_map() -> apygis.MapFile:
 
 def _records(m: apygis.MapFile) -> dict:
     """The map's records, layer by layer (empty layers left out: undo does not remove them)."""
-    return {
-        ext: (lay.symbols.tobytes(), lay.line_points.tobytes(), lay.texts.tobytes())
+    return {  # rows as tuples: the texts are Python strings (not comparable as bytes)
+        ext: (lay.symbols.tolist(), lay.line_points.tolist(), lay.texts.tolist())
         for ext, lay in sorted(m.layers.items())
         if len(lay)
     }

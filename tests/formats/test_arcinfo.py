@@ -410,7 +410,7 @@ def test_single_member_file_uses_its_attributes(sample_map, tmp_path):
     np.testing.assert_array_equal(t.layers["c"].texts, sample_map.layers["c"].texts)
     other = tmp_path / "plain.gen"
     other.write_bytes((tmp_path / "ZH1091_h_lines.gen").read_bytes())
-    m = apygis.read(other, layer="h", code=31)
+    m = apygis.read(other, layer="h", default_code=31)
     assert list(m.layers) == ["h"]
     assert set(m.layers["h"].line_points["code"].tolist()) == {31}
 

@@ -102,7 +102,7 @@ GOOD = "0001        1.00        2.00     3.00 12 ---- ---- ---- ----\n"
             + b"0001        1.00        2.00     3.00 "
             + b"x" * 25
             + b"\nEND\n",
-            "line 5: a text has at most 24 characters",
+            "line 5: a text has at most 24 characters in APY ASCII",
         ),
         (b"APY ASCII 1\nMAP T\xff\nEND\n", "line 2: not UTF-8"),
     ],

@@ -78,6 +78,9 @@ def _expected_counts(path: Path) -> dict[str, int]:
             cols = int(tags.get(70, ["1"])[0]) if float(tags.get(44, ["0"])[0]) else 1
             rows = int(tags.get(71, ["1"])[0]) if float(tags.get(45, ["0"])[0]) else 1
             symbols += cols * rows
+            # each visible attribute of a foreign block is a text, in every copy
+            shown = [s for s in subs if s["type"] == "ATTRIB" and not int(s.get(70, ["0"])[0]) & 1]
+            texts += len(shown) * cols * rows
         elif kind in ("TEXT", "MTEXT"):
             texts += 1
         elif kind == "LINE":
@@ -243,11 +246,11 @@ def test_empty_map_and_map_without_scale(tmp_path):
 def test_r2013_is_written_on_request(tmp_path):
     import ezdxf
 
-    apygis.write(small_map(), tmp_path / "s.dxf", dxfversion="R2013")
+    apygis.write(small_map(), tmp_path / "s.dxf", version="R2013")
     assert ezdxf.readfile(tmp_path / "s.dxf").dxfversion == "AC1027"
     assert apygis.read(tmp_path / "s.dxf") == small_map()
     with pytest.raises(DriverError, match="R12"):
-        apygis.write(small_map(), tmp_path / "s.dxf", dxfversion="R12")
+        apygis.write(small_map(), tmp_path / "s.dxf", version="R12")
 
 
 # --------------------------------------------------------------------------- the layout
@@ -431,8 +434,6 @@ def test_foreign_files_read_with_their_entity_counts(path):
     assert joined["texts"] == want["texts"]
     assert joined["lines"] <= want["lines"]
     assert joined["line_points"] <= got["line_points"]
-    for lay in plain:
-        assert all(len(t) <= 24 for t in lay.texts["text"].tolist())
 
 
 @pytest.mark.external
@@ -458,17 +459,28 @@ def test_ocs_polylines_are_read_in_world_coordinates():
 @pytest.mark.external
 def test_foreign_details_points_texts_inserts():
     leica = apygis.read(EXTERNAL / "ezdxf" / "Leica_Disto_S910.dxf")
-    (lay,) = leica.layers.values()
-    assert lay.ext == "x"  # LEICA_DISTO_* are no extension names
-    assert (lay.symbols["code"] == 0).all()  # POINTs: spot heights by default
-    assert lay.symbols["num"].tolist() == list(range(1, 12))
-    assert np.count_nonzero(lay.symbols["z"]) > 0
+    # one map layer per DXF layer, named from it
+    assert sorted(leica.layers) == ["ldd", "ldp", "lei"]
+    pts = leica.layers["ldp"].symbols
+    assert len(pts) == 11
+    assert pts["num"].tolist() == list(range(1, 12))
+    # a POINT with a height is a spot height (00), one at Z 0 an imported point (90)
+    assert np.array_equal(pts["code"] == 0, pts["z"] != 0)
+    assert set(pts["code"][pts["z"] == 0].tolist()) <= {90}
+    assert np.count_nonzero(pts["z"]) > 0
+    assert len(leica.layers["lei"].texts) == 11
+    assert len(leica.layers["ldd"].line_points) > 0
 
-    flags = apygis.read(EXTERNAL / "ezdxf" / "multi_insert_with_attribs.dxf", symbol_code=42)
-    sym = flags.layers["x"].symbols
+    flags = apygis.read(EXTERNAL / "ezdxf" / "multi_insert_with_attribs.dxf", point_code=42)
+    sym = flags.layers["fla"].symbols  # DXF layer FLAGS
     assert len(sym) == 25
     assert set(sym["code"].tolist()) == {42}
     assert len(np.unique(sym["num"])) == 25
+    # the blocks' attributes: texts on their own layer (0), one per copy, as GDAL reads them
+    tx = flags.layers["x"].texts["text"].tolist()
+    assert len(tx) == 75
+    assert tx.count("Flag") == 25
+    assert tx.count("x = 0.000") == 25
 
     texts = apygis.read(EXTERNAL / "ezdxf" / "text_alignments.dxf").layers["x"].texts
     assert "BASELINE ADJUSTMENTS" in texts["text"].tolist()
@@ -481,7 +493,9 @@ def test_foreign_details_points_texts_inserts():
 def test_circles_are_flattened_to_closed_lines_on_the_circle():
     path = EXTERNAL / "ezdxf" / "text_alignments.dxf"
     circles = [t for kind, t, _ in _raw_entities(path) if kind == "CIRCLE"]
-    lay = apygis.read(path, topology=False, sagitta_m=0.001).layers["x"]
+    m = apygis.read(path, topology=False, chord_m=0.001)
+    assert sorted(m.layers) == ["ins", "x"]  # DXF layers 0 and INSERT_POINTS
+    lay = m.layers["ins"]
     lp = lay.line_points
     cs = lay.chains()
     assert int(cs.closed.sum()) == len(circles) == 32
@@ -516,19 +530,21 @@ def test_binary_dxf_is_read(sample_map, tmp_path):
 
 
 @pytest.mark.external
-def test_layer_map_default_ext_and_skipping():
+def test_layer_map_skipping_and_unknown_names():
     path = EXTERNAL / "ezdxf" / "Leica_Disto_S910.dxf"
-    m = apygis.read(
-        path,
-        layer_map="LEICA_DISTO_POINT_ENTITY=p, leica_disto_3d=l,LEICA_DISTO_ID=-",
-        default_ext=None,
-    )
-    counts = {k: (len(v.symbols), len(v.texts)) for k, v in m.layers.items()}
-    assert counts["p"][0] == 11
-    assert sum(t for _, t in counts.values()) <= 11
-    m2 = apygis.read(path, layer_map={"leica_disto_point_entity": "P"}, default_ext="z")
-    assert set(m2.layers) <= {"p", "z"}
+    m = apygis.read(path, layer_map="LEICA_DISTO_POINT_ENTITY=p, leica_disto_3d=l,LEICA_DISTO_ID=-")
+    counts = {k: (len(v.symbols), len(v.texts), len(v.line_points)) for k, v in m.layers.items()}
+    assert counts == {"p": (11, 0, 0), "l": (0, 0, counts["l"][2])}
+    assert counts["l"][2] > 0
+    m2 = apygis.read(path, layer_map={"leica_disto_point_entity": "P"})
+    assert sorted(m2.layers) == ["ldd", "lei", "p"]
     assert len(m2.layers["p"].symbols) == 11
+    with pytest.raises(DriverError, match=r"'NOSUCH', which the file does not have .*LEICA"):
+        apygis.read(path, layer_map="NOSUCH=r")
+    only = apygis.read(path, layers=["leica_disto_id"])
+    assert list(only.layers) == ["lei"]
+    with pytest.raises(DriverError, match=r"no layer 'nope' in the file \(its layers: 0, "):
+        apygis.read(path, layers=["nope"])
 
 
 def test_layer_map_parsing():
@@ -538,8 +554,8 @@ def test_layer_map_parsing():
         dxf.parse_layer_map("ROADS")
     with pytest.raises(DriverError, match="1 to 3 letters"):
         dxf.parse_layer_map({"ROADS": "road"})
-    with pytest.raises(DriverError, match="symbol_code"):
-        dxf.read("nowhere.dxf", symbol_code=100)
+    with pytest.raises(DriverError, match="point_code"):
+        dxf.read("nowhere.dxf", point_code=100)
 
 
 def test_dxf_edited_in_cad_keeps_records_and_adds_new_geometry(sample_map, tmp_path):
@@ -769,7 +785,9 @@ def test_header_names_with_a_line_break_are_refused(key, value, tmp_path):
 
 
 def test_dxf_layer_name_with_a_line_break_is_not_a_layer_extension():
-    names = dxf._LayerNames(None, "x")
+    from apygis.formats._layers import LayerNames
+
+    names = LayerNames(None, ["r", "r\n"])
     assert names("r") == "r"
     assert names("r\n") == "x"
 

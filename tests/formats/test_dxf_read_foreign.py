@@ -1,5 +1,5 @@
-"""Reading DXF files that other programs wrote: content after EOF, closed polylines
-with arcs (bulges)."""
+"""Reading DXF files that other programs wrote: content after EOF, polylines with arcs
+(bulges)."""
 
 from __future__ import annotations
 
@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 import apygis
-from apygis.formats.dxf.read_ezdxf import bulge_tolerance
+from apygis.formats.dxf.read_ezdxf import chord_tolerance
 
 ezdxf = pytest.importorskip("ezdxf")
 
 R = 10.0
-TOL = bulge_tolerance(1000)  # a DXF without apygis's header: 1:1000, 0.025 m
+TOL = chord_tolerance(1000)  # a DXF without apygis's header: 1:1000, 0.025 m
 
 
 def _one_line(lay):
@@ -89,6 +89,16 @@ def test_four_bulge_closed_r12_polyline_is_a_circle(tmp_path):
     _check_circle(path, 0, 0, R)
 
 
+def test_two_vertex_closed_bulged_r12_polyline_is_a_circle(tmp_path):
+    doc = ezdxf.new("R12")
+    pl = doc.modelspace().add_polyline2d([(5 + R, 7), (5 - R, 7)], close=True)
+    for v in pl.vertices:
+        v.dxf.bulge = 1.0
+    path = tmp_path / "two12.dxf"
+    doc.saveas(path)
+    _check_circle(path, 5, 7, R)
+
+
 def test_four_bulge_closed_lwpolyline_follows_its_arcs(tmp_path):
     """Read as straight segments, the line was up to r - r/sqrt(2) = 2.9 m inside the circle."""
     doc = ezdxf.new()
@@ -109,31 +119,54 @@ def test_chord_tolerance_option(tmp_path):
     doc.modelspace().add_lwpolyline([(R, 0, 0, 0, 1), (-R, 0, 0, 0, 1)], format="xyseb", close=True)
     path = tmp_path / "c.dxf"
     doc.saveas(path)
-    coarse = len(apygis.read(path, bulge_m=0.5).layers["x"].line_points)
-    fine = len(apygis.read(path, bulge_m=0.001).layers["x"].line_points)
+    coarse = len(apygis.read(path, chord_m=0.5).layers["x"].line_points)
+    fine = len(apygis.read(path, chord_m=0.001).layers["x"].line_points)
     assert coarse < fine
-    (lay,) = apygis.read(path, bulge_m=0.001).layers.values()
+    (lay,) = apygis.read(path, chord_m=0.001).layers.values()
     xy, closed, _ = _one_line(lay)
     assert closed
     _on_circle(xy, 0, 0, R, 0.001)
     with pytest.raises(apygis.errors.DriverError):
-        apygis.read(path, bulge_m=0)
+        apygis.read(path, chord_m=0)
 
 
-def test_bulge_tolerance_rule():
-    assert bulge_tolerance(1000) == pytest.approx(0.025)
-    assert bulge_tolerance(5000) == pytest.approx(0.125)
+def test_chord_tolerance_rule():
+    assert chord_tolerance(1000) == pytest.approx(0.025)
+    assert chord_tolerance(5000) == pytest.approx(0.125)
 
 
-def test_open_bulged_polyline_is_still_read_through_its_vertices(tmp_path, caplog):
+def test_open_bulged_polyline_follows_its_arc(tmp_path):
+    """A half circle from (R, 0) to (-R, 0) through (0, R): not a straight line of 2 points."""
     doc = ezdxf.new()
     doc.modelspace().add_lwpolyline([(R, 0, 0, 0, 1), (-R, 0)], format="xyseb")
     path = tmp_path / "open.dxf"
     doc.saveas(path)
-    with caplog.at_level(logging.INFO, logger="apygis.formats.dxf"):
-        lay = apygis.read(path).layers["x"]
-    assert len(lay.line_points) == 2
-    assert "open polylines have arcs" in caplog.text
+    lay = apygis.read(path).layers["x"]
+    xy, closed, _ = _one_line(lay)
+    assert not closed
+    assert len(xy) > 8
+    assert xy[0].tolist() == [R, 0]
+    assert xy[-1].tolist() == [-R, 0]
+    d = np.hypot(xy[:, 0], xy[:, 1])
+    assert np.all(np.abs(d - R) <= 1e-9)
+    assert xy[:, 1].min() >= 0
+    assert xy[:, 1].max() == pytest.approx(R, abs=TOL)
+    q = (xy[1:] + xy[:-1]) / 2
+    assert np.all(R - np.hypot(q[:, 0], q[:, 1]) <= TOL + 1e-9)
+
+
+def test_open_bulged_r12_polyline_follows_its_arcs(tmp_path):
+    doc = ezdxf.new("R12")
+    pl = doc.modelspace().add_polyline2d([(R, 0), (0, R), (-R, 0)])
+    for v in list(pl.vertices)[:2]:
+        v.dxf.bulge = math.tan(math.pi / 8)
+    path = tmp_path / "open12.dxf"
+    doc.saveas(path)
+    lay = apygis.read(path).layers["x"]
+    xy, closed, _ = _one_line(lay)
+    assert not closed
+    assert len(xy) > 8
+    assert np.all(np.abs(np.hypot(xy[:, 0], xy[:, 1]) - R) <= 1e-9)
 
 
 # --------------------------------------------------------------------------- after EOF

@@ -64,6 +64,10 @@ def test_non_latin_texts_read_right_by_gdal_and_ezdxf(tmp_path):
     assert [e.dxf.text for e in doc.modelspace().query("TEXT")] == NON_LATIN
     assert apygis.read(path) == m
     assert apygis.read(path, fast=False) == m
+    (tmp_path / "a").mkdir()
+    _, ascii_path = _write(tmp_path / "a", ["Kirchweg", "Dorfbach"])
+    assert ascii_path.read_bytes().isascii()  # nothing to recode: the Latin code page
+    assert b"$DWGCODEPAGE\n  3\nANSI_1252\n" in ascii_path.read_bytes()
 
 
 def test_carets_escaped_for_gdal_and_ezdxf(tmp_path):

@@ -74,16 +74,17 @@ def test_reference_file_imports_with_gdal_geometry():
     m = apygis.read(path)
     meta, _, arcs, _ = gdal_layer(path, "ARC")
     assert m.crs_string() == meta["crs"] == "EPSG:26713"
-    lay = m.layers[e00.DEFAULT_LAYER]
+    assert sorted(m.layers) == ["arc", "lab"]  # as GDAL's layers ARC and LAB
+    lay = m.layers["arc"]
     # the topology is rebuilt; the drawn network is GDAL's arcs, segment for segment
     gdal_lines = [shapely.get_coordinates(g) for g in arcs]
     assert segments(drawn_lines(lay)) == segments(gdal_lines)
     assert [i for i in lay.validate() if i.severity == "error"] == []
     _, _, labs, fields = gdal_layer(path, "LAB")
-    np.testing.assert_allclose(
-        np.column_stack([lay.symbols["x"], lay.symbols["y"]]), shapely.get_coordinates(labs)
-    )
-    assert lay.symbols["num"].tolist() == fields["ValueId"].tolist()
+    sym = m.layers["lab"].symbols
+    np.testing.assert_allclose(np.column_stack([sym["x"], sym["y"]]), shapely.get_coordinates(labs))
+    assert sym["num"].tolist() == fields["ValueId"].tolist()
+    assert set(sym["code"].tolist()) == {90}  # no code item: imported points
 
 
 @pytest.mark.external
@@ -124,7 +125,7 @@ def test_compressed_file(tmp_path):
     for j, g in enumerate(geoms):
         np.testing.assert_array_equal(xy[off[j] : off[j + 1]], shapely.get_coordinates(g))
     m = apygis.read(path, recover=True)
-    assert segments(drawn_lines(m.layers["a"])) == segments(
+    assert segments(drawn_lines(m.layers["arc"])) == segments(
         [shapely.get_coordinates(g) for g in geoms]
     )
 
@@ -380,7 +381,7 @@ def test_recover_keeps_what_was_read(tmp_path, small_e00):
     with pytest.raises(FormatError):
         apygis.read(p)
     m = apygis.read(p, recover=True)
-    lay = m.layers[e00.DEFAULT_LAYER]
+    lay = m.layers["arc"]
     assert len(lay.chains()) == len(export_lines(strategies.small_map().layers["r"]))
 
 
@@ -499,7 +500,7 @@ def test_foreign_arcs_go_through_the_one_rebuild(tmp_path, caplog):
     p = tmp_path / "sq.e00"
     p.write_bytes(b"\n".join(text))
     with caplog.at_level("INFO", logger="apygis.formats.e00"):
-        lay = apygis.read(p).layers["a"]
+        lay = apygis.read(p).layers["arc"]
     assert lay.counts()["closed_lines"] == 1
     assert lay.counts()["lines"] == 3
     assert len(lay.line_points) == 8

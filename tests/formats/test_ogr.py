@@ -60,6 +60,8 @@ def test_gdal_reads_every_writer(sample_map, tmp_path, name):
         expected |= {f"{lay.ext}_line_points"} if c["line_points"] else set()
         expected |= {f"{lay.ext}_areas"} if c["closed_lines"] else set()
         expected |= {f"{lay.ext}_lines"} if c["lines"] > c["closed_lines"] else set()
+    if name == "gpkg":
+        expected.add("layer_styles")  # QGIS's styles (test_gpkg_styles.py)
     assert set(layers) == expected
 
     for lay in sample_map:
@@ -201,6 +203,7 @@ def test_gpkg_layers_header_and_empty_layers(tmp_path):
     apygis.write(m, tmp_path / "e.gpkg")
     assert sorted(str(n) for n, _ in pyogrio.list_layers(tmp_path / "e.gpkg")) == [
         "apygis_map",
+        "layer_styles",
         "r_symbols",
     ]
     back = apygis.read(tmp_path / "e.gpkg")
@@ -254,6 +257,7 @@ def test_progress_is_reported(sample_map, tmp_path):
     calls.clear()
     apygis.read(tmp_path / "p.gpkg", progress=lambda d, t: calls.append((d, t)))
     layers = [str(n) for n, _ in pyogrio.list_layers(tmp_path / "p.gpkg")]
+    layers.remove("layer_styles")  # no geometry, no map layer: not read
     # every layer is read: L_lines and L_areas are checked against L_line_points for edits
     assert calls[-1][0] == calls[-1][1] == len(layers) == len(calls)
 
@@ -333,7 +337,8 @@ def test_foreign_gpkg_imports_with_rebuilt_topology(tmp_path):
     assert m.id == "foreign"
     assert m.crs_string() == "EPSG:2056"
     assert m.scale is None
-    assert sorted(m.layers) == ["h", "r", "x", "y"]  # trees -> x, names -> y
+    # one map layer per OGR layer, named from it: trees -> tre, names -> nam
+    assert sorted(m.layers) == ["h", "nam", "r", "tre"]
     roads = m.layers["r"]
     assert roads.counts()["closed_lines"] == 1
     assert roads.counts()["lines"] == 2
@@ -352,10 +357,10 @@ def test_foreign_gpkg_imports_with_rebuilt_topology(tmp_path):
     pond = m.layers["h"]
     assert pond.counts()["closed_lines"] == 2  # the shore and the island
     assert (pond.line_points["code"] == 7).all()  # no code field: the default
-    trees = m.layers["x"].symbols
+    trees = m.layers["tre"].symbols
     assert trees["code"].tolist() == [23, 7]
     assert trees["z"].tolist() == [400, 401]
-    names = m.layers["y"].texts
+    names = m.layers["nam"].texts
     assert names["text"].tolist() == ["Dorfplatz"]
     assert names["num"].tolist() == [1]
 
@@ -404,7 +409,7 @@ def test_foreign_shapefile_zip_and_geojson(tmp_path):
     )
     m = apygis.read(d / "wells.shp")
     assert m.id == "wells"
-    assert m.layers["x"].symbols["code"].tolist() == [26, 27]
+    assert m.layers["wel"].symbols["code"].tolist() == [26, 27]  # layer wells: map layer wel
     with zipfile.ZipFile(tmp_path / "wells.shz", "w") as z:
         for p in d.iterdir():
             z.write(p, p.name)
@@ -414,7 +419,10 @@ def test_foreign_shapefile_zip_and_geojson(tmp_path):
     pyogrio.raw.write(gj, pts, [], [], driver="GeoJSON", geometry_type="Point")
     m = apygis.read(gj)  # no crs member: RFC 7946's WGS 84
     assert m.crs_string() == "EPSG:4326"
-    assert len(m.layers["x"].symbols) == 2
+    (lay,) = m.layers.values()  # the layer w: map layer w
+    assert lay.ext == "w"
+    # 2-D points without a code field: imported points (90), not spot heights
+    assert lay.symbols["code"].tolist() == [90, 90]
 
 
 # --------------------------------------------------------------------------- errors
@@ -470,7 +478,7 @@ def test_bad_input_raises_format_errors(tmp_path, sample_map):
         apygis.read(two, driver="fgb")
     assert apygis.read(two / "B.fgb") == sample_map
 
-    with pytest.raises(DriverError, match="layer_map"):
+    with pytest.raises(DriverError, match="layer map"):
         apygis.read(junk, driver="gpkg", layer_map="roads")
     with pytest.raises(DriverError, match="default_code"):
         apygis.read(junk, driver="gpkg", default_code=100)
@@ -538,3 +546,31 @@ def test_foreign_coordinates_beyond_any_ground_are_refused(tmp_path):
     )
     with pytest.raises(FormatError, match="feature 1: coordinates are not finite or exceed"):
         apygis.read(path)
+
+
+@pytest.mark.parametrize(("driver", "ext"), [("GPKG", "gpkg"), ("FlatGeobuf", "fgb")])
+def test_surfaces_are_refused_as_such(tmp_path, driver, ext):
+    """A TIN (what GDAL gives for a multipatch) is refused saying what it is, not with
+    shapely's "ParseException: Unknown WKB type 16"."""
+    import struct
+
+    ring = struct.pack("<I", 4) + b"".join(
+        struct.pack("<3d", *p) for p in [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 0)]
+    )
+    tri = struct.pack("<BII", 1, 1017, 1) + ring
+    tin = struct.pack("<BII", 1, 1016, 1) + tri
+    line = shapely.to_wkb(shapely.LineString([(0, 0, 0), (1, 1, 0)]), flavor="iso")
+    path = tmp_path / f"tin.{ext}"
+    pyogrio.raw.write(
+        path,
+        np.array([line, tin], dtype=object),
+        [np.array([1, 2])],
+        ["id"],
+        driver=driver,
+        geometry_type="Unknown",
+        crs="EPSG:2056",
+    )
+    with pytest.raises(FormatError, match=r"feature 2: a TIN .*surfaces are not supported") as exc:
+        apygis.read(path)
+    assert "ParseException" not in str(exc.value)
+    assert "WKB type" not in str(exc.value)

@@ -264,9 +264,9 @@ def test_convert_to_patb_through_the_cli(tmp_path):
     res = _run("convert", src, out / "x.patb", "--to", "patb")
     assert res.exit_code == 1
     assert "exists; use --overwrite" in res.output
-    # --driver names it too, and a folder DST keeps batch mode
+    # --driver names it too, and a folder DST (a trailing slash) receives it under its name
     assert _run("convert", src, out / "y.im", "--driver", "patb").exit_code == 0
-    assert _run("convert", "--to", "patb", src, out / "batch").exit_code == 0
+    assert _run("convert", "--to", "patb", src, f"{out / 'batch'}/").exit_code == 0
     assert (out / "batch" / "DENS.patb").read_bytes() == want
 
 

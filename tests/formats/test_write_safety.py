@@ -314,8 +314,8 @@ def test_a_real_write_failure_in_gdal_or_python_names_the_target(
 
 
 def test_gpkg_on_a_full_disk_says_so(sample_map, tmp_path, monkeypatch):
+    import pyogrio
     import pyogrio.errors
-    import pyogrio.raw
 
     def sqlite_fails(*a, **k):
         raise pyogrio.errors.DataSourceError("no such table: gpkg_contents")
@@ -323,14 +323,14 @@ def test_gpkg_on_a_full_disk_says_so(sample_map, tmp_path, monkeypatch):
     class Full:
         f_bavail, f_frsize = 0, 4096
 
-    monkeypatch.setattr(pyogrio.raw, "write", sqlite_fails)
+    monkeypatch.setattr(pyogrio, "write_arrow", sqlite_fails)  # GeoPackages go through Arrow
     monkeypatch.setattr(os, "statvfs", lambda p: Full())
     with pytest.raises(WriteError, match=r"M.gpkg: cannot write: no space left on device"):
         apygis.write(sample_map, tmp_path / "M.gpkg")
     assert list(tmp_path.iterdir()) == []
     monkeypatch.undo()
     # with space left, GDAL's own message, naming the target and not the temporary folder
-    monkeypatch.setattr(pyogrio.raw, "write", sqlite_fails)
+    monkeypatch.setattr(pyogrio, "write_arrow", sqlite_fails)
     with pytest.raises(Exception, match=r"M.gpkg: layer apygis_map: cannot write: no such ") as ei:
         apygis.write(sample_map, tmp_path / "M.gpkg")
     assert ".apygis-" not in str(ei.value)

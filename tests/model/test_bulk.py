@@ -32,14 +32,15 @@ def test_the_numbering_rule_fills_free_numbers_past_9999():
 def test_add_texts_checks_every_text():
     lay = apygis.Layer("t")
     assert lay.add_texts(np.zeros((2, 3)), ["Kirchweg", "Bach"]).tolist() == [1, 2]
+    long = "Chilliwack General Hospital"  # 27 characters: the model keeps any length
+    assert lay.add_texts(np.zeros((1, 3)), [long]).tolist() == [3]
     for bad, match in (
-        ("x" * 25, "at most 24"),
         ("two\nlines", "control"),
         ("Z\udcfcrich", "lone surrogate"),
     ):
         with pytest.raises(RecordError, match=match):
             lay.add_texts(np.zeros((2, 3)), ["fine", bad])
-    assert lay.texts["text"].tolist() == ["Kirchweg", "Bach"]  # nothing added
+    assert lay.texts["text"].tolist() == ["Kirchweg", "Bach", long]  # nothing added
 
 
 @pytest.mark.parametrize(

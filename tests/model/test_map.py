@@ -48,7 +48,6 @@ def test_closed_line_links_last_to_first():
         (lambda lay: lay.add_symbol(0, 0, 0, 3.0), "integer"),
         (lambda lay: lay.add_symbol(math.nan, 0, 0, 3), "finite"),
         (lambda lay: lay.add_symbol("a", 0, 0, 3), "numbers"),
-        (lambda lay: lay.add_text(0, 0, 0, "x" * 25), "at most 24"),
         (lambda lay: lay.add_text(0, 0, 0, "a\nb"), "control"),
         (lambda lay: lay.add_line([], 3), "one or more"),
         (lambda lay: lay.add_line([(0, 0)], 3), "one or more"),

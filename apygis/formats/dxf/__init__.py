@@ -28,12 +28,17 @@ million line points take seconds, not minutes.
 
 Reading any DXF (through :func:`ezdxf.recover.read`, which repairs broken
 legacy files; what it repaired is logged): model-space ``POINT`` and
-``INSERT`` become symbols, ``LINE``, ``LWPOLYLINE``, ``POLYLINE`` (2-D in
-their object coordinate system, or 3-D) and flattened ``ARC``, ``CIRCLE``,
-``ELLIPSE`` and ``SPLINE`` become lines, ``TEXT`` and ``MTEXT`` texts. DXF
-layers map to map layers by ``layer_map``; lines without apygis XDATA get
-their topology rebuilt by the model's one rebuild, :meth:`apygis.model.Layer.add_polylines`
-(its report logged). A file that
+``INSERT`` become symbols (the visible attributes of foreign blocks texts),
+``LINE``, ``LWPOLYLINE``, ``POLYLINE`` (2-D in their object coordinate
+system, or 3-D; bulges flattened on the true arcs), ``ARC``, ``CIRCLE``,
+``ELLIPSE``, ``SPLINE`` (flattened within ``chord_m``), ``LEADER``, the
+boundaries of ``HATCH`` and the outlines of ``SOLID``, ``TRACE`` and
+``3DFACE`` become lines, ``TEXT`` and ``MTEXT`` texts, and ``DIMENSION``,
+``MULTILEADER`` and ``MLINE`` give their lines and texts. Whatever else is
+skipped is counted and reported per kind. Each DXF layer becomes a map layer
+(``layer_map`` or a name derived from it: :mod:`apygis.formats._layers`);
+lines without apygis XDATA get their topology rebuilt by the model's one
+rebuild, :meth:`apygis.model.Layer.add_polylines` (its report logged). A file that
 apygis wrote and nobody changed since (the header record holds the size and
 CRC-32 of the entities section) is parsed by the writer's own templates
 instead of ezdxf: the same records, a hundred times faster.
@@ -57,16 +62,15 @@ Examples
 ...     read(os.path.join(d, "t1.dxf")) == m
 True
 >>> parse_layer_map("ROADS=r, WATER=h, Defpoints=-")
-{'ROADS': 'r', 'WATER': 'h', 'DEFPOINTS': None}
+{'ROADS': 'r', 'WATER': 'h', 'Defpoints': None}
 """
 
 from __future__ import annotations
 
-from apygis.formats import Driver
+from apygis.formats import READ_OPTIONS, Driver, Option
+from apygis.formats._layers import parse_layer_map
 from apygis.formats.dxf._collect import _int_or_none as _int_or_none
-from apygis.formats.dxf._collect import _LayerNames as _LayerNames
 from apygis.formats.dxf._collect import _symbol_code as _symbol_code
-from apygis.formats.dxf._collect import parse_layer_map
 from apygis.formats.dxf._common import (
     APPID,
     BLOCK_PREFIX,
@@ -109,4 +113,21 @@ DRIVER = Driver(
     reader=read,
     writer=write,
     probe=probe,
+    stream=True,
+    options=(
+        *(
+            READ_OPTIONS[k]
+            for k in ("layers", "layer_map", "tolerance_m", "crs", "default_code", "point_code")
+        ),
+        Option(
+            "chord_m",
+            "r",
+            "float",
+            "chord tolerance of flattened curves, drawing units (default 0.1 mm x scale / 4)",
+            low=1e-9,
+        ),
+        Option("topology", "r", "bool", "rebuild junctions and merge lines whose ends meet"),
+        Option("fast", "r", "bool", "read an untouched apygis DXF by apygis's own parser"),
+        Option("version", "w", "choice", "DXF version written", choices=tuple(DXF_VERSIONS)),
+    ),
 )

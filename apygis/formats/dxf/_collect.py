@@ -4,97 +4,64 @@ records collected per layer."""
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Mapping
 
 import numpy as np
 
-from apygis.errors import DriverError, FormatError
+from apygis.errors import FormatError
+from apygis.formats._layers import LayerNames, parse_layer_map
 from apygis.formats._readguard import MAX_COORD, ascii_int, loads_json
 from apygis.formats.dxf._common import (
     _BLOCK_RE,
     _CTRL,
-    _EXT_LIKE,
     APPID,
     FORMAT_NAME,
     FORMAT_VERSION,
 )
 from apygis.model.map import check_ext, check_map_id
-from apygis.model.records import MAX_CODE, TEXT_LEN
+from apygis.model.records import MAX_CODE
+from apygis.model.symbols import SPOT_HEIGHT
 
 # =========================================================================== options
 
 
-def parse_layer_map(value) -> dict[str, str | None]:
-    """A layer map from a dict or from the CLI form ``"ROADS=r,WATER=h"``.
+class _Layers:
+    """DXF layer name -> map layer extension (None: not read).
 
-    Keys are DXF layer names (compared without regard to case, as DXF
-    does); values are layer extensions (1-3 letters), or ``None`` / ``"-"``
-    / ``""`` to skip the layer's entities. Returned with upper-case keys.
-
-    >>> parse_layer_map({"Roads": "R", "0": "-"})
-    {'ROADS': 'r', '0': None}
+    The names follow :class:`apygis.formats._layers.LayerNames` (the rule of
+    every reader: ``layer_map``, names like an extension, one map layer per
+    other DXF layer named from it); ``layers`` (option) selects the DXF
+    layers to read. :meth:`start` is given the file's layer names before the
+    first entity, refusing ``layer_map`` and ``layers`` names it lacks.
     """
-    if value is None:
-        return {}
-    if isinstance(value, str):
-        items = []
-        for part in value.split(","):
-            if not part.strip():
-                continue
-            name, sep, ext = part.rpartition("=")
-            if not sep or not name.strip():
-                raise DriverError(
-                    f"dxf layer_map: expected DXF-LAYER=ext pairs separated by commas, "
-                    f"not {part.strip()!r}"
-                )
-            items.append((name.strip(), ext.strip()))
-    elif isinstance(value, Mapping):
-        items = list(value.items())
-    else:
-        raise DriverError(f"dxf layer_map: a dict or a string 'A=x,B=y', not {value!r}")
-    out: dict[str, str | None] = {}
-    for name, ext in items:
-        if not isinstance(name, str):
-            raise DriverError(f"dxf layer_map: a DXF layer name is a string, not {name!r}")
-        if ext is None or ext in ("", "-"):
-            out[name.upper()] = None
-            continue
-        try:
-            out[name.upper()] = check_ext(ext)
-        except ValueError as exc:
-            raise DriverError(f"dxf layer_map: layer {name!r}: {exc}") from None
-    return out
 
+    def __init__(self, layer_map, layers, where=None):
+        parse_layer_map(layer_map)  # a bad option fails before the file is read
+        self.where = where
+        self.layer_map = layer_map
+        self.wanted = layers
+        self.names = LayerNames(layer_map)
+        self.selected: set[str] | None = None
 
-class _LayerNames:
-    """DXF layer name -> map layer extension (or None: skip)."""
-
-    def __init__(self, layer_map, default_ext):
-        self.map = parse_layer_map(layer_map)
-        if default_ext is not None and default_ext not in ("", "-"):
-            try:
-                default_ext = check_ext(default_ext)
-            except ValueError as exc:
-                raise DriverError(f"dxf default_ext: {exc}") from None
-        else:
-            default_ext = None
-        self.default = default_ext
-        self._cache: dict[str, str | None] = {}
+    def start(self, present: list[str], header: dict | None) -> None:
+        ordered = list(dict.fromkeys([*(header["layers"] if header else []), *present]))
+        self.names = LayerNames(self.layer_map, ordered, where=self.where)
+        self.names.check_used(ordered)
+        groups = self.names.groups(ordered)  # --layer takes the map layer's name too
+        self.selected = self.names.select(self.wanted, ordered, groups)
 
     def __call__(self, name: str) -> str | None:
-        try:
-            return self._cache[name]
-        except KeyError:
-            pass
-        key = name.upper()
-        if key in self.map:
-            ext = self.map[key]
-        elif _EXT_LIKE.fullmatch(name):
-            ext = name.lower()
-        else:
-            ext = self.default
-        self._cache[name] = ext
-        return ext
+        if self.selected is not None and name.upper() not in self.selected:
+            return None
+        return self.names(name)
+
+    def collector(self, collected: dict):
+        """``layer name -> _Collect`` (created on first use) or None for a layer not read."""
+
+        def target(name: str) -> _Collect | None:
+            ext = self(name)
+            return None if ext is None else collected.setdefault(ext, _Collect())
+
+        return target
 
 
 # --------------------------------------------------------------------------- the header record
@@ -175,6 +142,7 @@ class _Collect:
         self.own_nums: set[int] = set()  # line-point numbers read so far from own lines
         self.lines: list[np.ndarray] = []
         self.closed: list[bool] = []
+        self.codes: list[int] = []
 
 
 def _seed_layers(header: dict | None, names) -> dict[str, _Collect]:
@@ -202,13 +170,19 @@ def _int_or_none(s) -> int | None:
 
 
 def _clean_text(s: str, stats: Counter) -> str:
-    s = _CTRL.sub(" ", s)
-    if len(s) > TEXT_LEN:
-        stats["truncated"] += 1
-        if stats["truncated"] == 1:
-            stats["first_truncated"] = s  # type: ignore[assignment]
-        s = s[:TEXT_LEN]
-    return s
+    """A text as the model takes it: whole, control characters (tabs) as blanks (counted)."""
+    clean = _CTRL.sub(" ", s)
+    if clean != s:
+        stats["controls"] += 1
+    return clean
+
+
+def _point_code(z: float, opts: dict) -> int:
+    """The code of a foreign point: ``default_code`` if given, else a spot height (00)
+    where it has a height (Z not 0), else ``point_code`` (90, imported point)."""
+    if opts["default_code"] is not None:
+        return int(opts["default_code"])
+    return SPOT_HEIGHT if z != 0.0 else int(opts["point_code"])
 
 
 def _symbol_code(code_text, block_name, default: int) -> int:

@@ -25,7 +25,6 @@ _GRID = 15
 _CHUNK = 250  # characters per string tag of the header record
 _BINARY_SENTINEL = b"AutoCAD Binary DXF\r\n\x1a\x00"
 _BLOCK_RE = re.compile(rf"^{BLOCK_PREFIX}([0-9][0-9])$", re.IGNORECASE)
-_EXT_LIKE = re.compile(r"^[A-Za-z]{1,3}$")
 _CTRL = re.compile("[\x00-\x1f\x7f-\x9f]")
 _ENTITIES_START = "\n  2\nENTITIES\n"
 _ENTITIES_END = "  0\nENDSEC\n"

@@ -11,13 +11,15 @@ import numpy as np
 
 from apygis.errors import DriverError, FormatError, RecordError, TopologyError
 from apygis.formats._io import read_bytes
-from apygis.formats.dxf._collect import _Collect, _LayerNames
+from apygis.formats._report import warn
+from apygis.formats.dxf._collect import _Collect, _Layers
 from apygis.formats.dxf._common import _BINARY_SENTINEL, log
-from apygis.formats.dxf.read_ezdxf import _slow_read
+from apygis.formats.dxf.read_ezdxf import _slow_read, skip_reason
 from apygis.formats.dxf.read_fast import _fast_read
 from apygis.model.map import Layer, MapFile
 from apygis.model.polylines import to_csr
-from apygis.model.records import LINE_DTYPE, MAX_CODE, TEXT_LEN, next_numbers
+from apygis.model.records import LINE_DTYPE, MAX_CODE, next_numbers
+from apygis.model.symbols import IMPORTED_POINT
 
 
 def _sniff(data: bytes, path) -> bytes:
@@ -45,11 +47,13 @@ def _sniff(data: bytes, path) -> bytes:
         raise FormatError("truncated: the file does not end with the tags 0 and EOF", path=path)
     rest = data[end:]
     if rest.strip(b" \t\r\n\0\x1a"):
-        log.warning(
-            "%s: %d bytes (%d lines) after the tags 0 and EOF ignored",
-            path,
-            len(rest),
+        warn(
+            log,
+            f"{path}: {len(rest)} bytes ({len(rest.splitlines())} lines) after the tags 0 and "
+            "EOF ignored",
+            "damaged",
             len(rest.splitlines()),
+            "after EOF",
         )
     return data if end == len(data) else data[:end]
 
@@ -123,12 +127,13 @@ def _numbers(given: list, path, what: str) -> np.ndarray:
     repeat[order[1:]] = nums[order][1:] == nums[order][:-1]
     renumber = ~missing & (repeat | (nums < 0))
     if renumber.any():
-        log.warning(
-            "%s: %d %s number(s) repeated or negative (e.g. %d): numbered anew",
-            path,
+        warn(
+            log,
+            f"{path}: {int(renumber.sum())} {what} number(s) repeated or negative (e.g. "
+            f"{int(nums[renumber][0])}): numbered anew",
+            "renumbered",
             int(renumber.sum()),
             what,
-            int(nums[renumber][0]),
         )
     new = missing | renumber
     nums[new] = next_numbers(nums[~new], int(new.sum()))
@@ -165,21 +170,30 @@ def _make_layer(ext: str, c: _Collect, opts: dict, path) -> Layer:
             layer.add_line_points(lp)
         if c.lines:
             coords, offsets = to_csr(c.lines)
+            codes = np.array(c.codes, dtype=np.int64) if c.codes else opts["line_code"]
             rep = layer.add_polylines(
                 coords,
                 offsets,
-                opts["line_code"],
+                codes,
                 np.array(c.closed, dtype=bool),
                 snap_m=opts["tolerance_m"],
                 crs=opts.get("crs"),
                 join=bool(opts["topology"]),
             )
-            say = log.warning if rep.refused or rep.duplicates_removed or rep.empty else log.info
-            say("%s: layer %s: lines rebuilt: %s", path, ext, rep.message())
+            _rebuild_report(path, ext, rep)
     except (RecordError, TopologyError) as exc:
         msg = str(exc) if str(exc).startswith(f"layer {ext}:") else f"layer {ext}: {exc}"
         raise FormatError(msg, path=path) from None
     return layer
+
+
+def _rebuild_report(path, ext: str, rep) -> None:
+    """The topology rebuild's report: a warning when it refused or removed anything."""
+    text = f"{path}: layer {ext}: lines rebuilt: {rep.message()}"
+    if rep.refused or rep.duplicates_removed or rep.empty:
+        warn(log, text, "rebuilt", None, "lines")
+    else:
+        log.info("%s", text)
 
 
 def _map_id(path) -> str:
@@ -192,13 +206,12 @@ def read(
     path,
     progress=None,
     layer_map=None,
-    default_ext: str | None = "x",
-    symbol_code: int = 0,
-    line_code: int = 0,
+    layers=None,
+    default_code: int | None = None,
+    point_code: int = IMPORTED_POINT,
     tolerance_m: float = 0.005,
+    chord_m: float | None = None,
     topology: bool = True,
-    sagitta_m: float = 0.01,
-    bulge_m: float | None = None,
     crs=None,
     fast: bool = True,
 ) -> MapFile:
@@ -210,32 +223,33 @@ def read(
     progress : callable, optional
         ``progress(done, total)`` over the model-space entities.
     layer_map : dict or str, optional
-        DXF layer name -> layer extension (see :func:`parse_layer_map`);
-        ``"ROADS=r,WATER=h,0=-"`` in the CLI form.
-    default_ext : str or None
-        The layer for entities of DXF layers that neither ``layer_map`` names
-        nor are named like an extension (1-3 letters); None skips them.
-    symbol_code : int
-        Code of symbols from POINTs and from INSERTs that carry no code
-        (attribute ``CODE``, block name ``APY_SYM_NN``). 0 is the spot height.
-    line_code : int
-        Code of lines read from plain DXF geometry.
+        DXF layer name -> map layer extension, or None / ``"-"`` to skip the
+        DXF layer (``{"ROADS": "r"}`` or ``"ROADS=r,WATER=h,0=-"``). A name
+        the file does not have is refused. Other DXF layers map by the rule of
+        :mod:`apygis.formats._layers` (one map layer each, named from it).
+    layers : list of str, optional
+        Read only these DXF layers (names compared without regard to case;
+        one the file does not have is refused).
+    default_code : int or None
+        Code (0-99) of every line and point read from plain DXF geometry.
+        None: lines 00; points as ``point_code`` says.
+    point_code : int
+        Code of a POINT or foreign INSERT without a height (Z 0) when
+        ``default_code`` is None; one with a height is a spot height (00).
+        Default 90, "imported point".
     tolerance_m : float
         Distance within which line ends join other lines (see
-        :meth:`apygis.model.Layer.add_polylines`).
+        :meth:`apygis.model.Layer.add_polylines`), metres on the ground.
+    chord_m : float or None
+        Largest distance of a chord from the curve when arcs (ARC, CIRCLE,
+        bulges of polylines and hatch boundaries), ellipses and splines are
+        flattened to line points, on the true curves, in drawing units.
+        None (default): a quarter of 0.1 mm at the compilation scale 1:S,
+        ``0.1 mm x S / 4`` (S from the header record, 1000 for a DXF without
+        one: 0.025 m).
     topology : bool
         Rebuild junctions and merge lines whose ends meet (default); with
         False every DXF line becomes one chain as it is.
-    sagitta_m : float
-        Largest distance of a chord from the curve when ARC, CIRCLE,
-        ELLIPSE and SPLINE are flattened to line points.
-    bulge_m : float or None
-        Largest distance of a chord from the arc when the arc segments
-        (bulges) of a closed LWPOLYLINE or 2-D POLYLINE are flattened. None
-        (default): a quarter of 0.1 mm at the compilation scale 1:S,
-        ``0.1 mm x S / 4`` (S from the header record, 1000 for a DXF without
-        one: 0.025 m). Open polylines are still read through their vertices
-        only (logged).
     crs : optional
         The CRS of a DXF that apygis did not write (DXF has none), or one
         that overrides the header's.
@@ -244,6 +258,9 @@ def read(
         record's checksum of the entities matches) by apygis's own parser,
         not through ezdxf (the same result, 100 times faster). False always
         reads through ezdxf.
+
+    Entities that are not imported (meshes, images, ...) are counted, and
+    each kind is reported in one warning (:mod:`apygis.formats._report`).
 
     Returns
     -------
@@ -255,35 +272,43 @@ def read(
         The file is missing, not DXF, or damaged beyond repair; or apygis's
         own records in it (XDATA, header record) are malformed.
     DriverError
-        An option is invalid.
+        An option is invalid, or names a layer the file does not have.
     """
-    for name, value in (("symbol_code", symbol_code), ("line_code", line_code)):
+    codes = {"point_code": point_code}
+    if default_code is not None:
+        codes["default_code"] = default_code
+    for name, value in codes.items():
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
             raise DriverError(f"dxf {name}: an integer 0-{MAX_CODE}, not {value!r}")
         if not 0 <= value <= MAX_CODE:
             raise DriverError(f"dxf {name}: {value} is outside 0-{MAX_CODE}")
     try:
         tolerance_m = float(tolerance_m)
-        sagitta_m = float(sagitta_m)
-        bulge = None if bulge_m is None else float(bulge_m)
     except (TypeError, ValueError):
-        raise DriverError("dxf tolerance_m and sagitta_m are numbers") from None
-    if not sagitta_m > 0 or not tolerance_m >= 0 or not (bulge is None or bulge > 0):
-        raise DriverError("dxf: sagitta_m and bulge_m must be > 0 and tolerance_m >= 0")
-    names = _LayerNames(layer_map, default_ext)
+        raise DriverError(f"dxf tolerance_m: a distance in metres, not {tolerance_m!r}") from None
+    if not tolerance_m >= 0 or not np.isfinite(tolerance_m):
+        raise DriverError(f"dxf tolerance_m: a distance in metres >= 0, not {tolerance_m!r}")
+    try:
+        chord = None if chord_m is None else float(chord_m)
+    except (TypeError, ValueError):
+        raise DriverError(f"dxf chord_m: a distance > 0, not {chord_m!r}") from None
+    if chord is not None and not (chord > 0 and np.isfinite(chord)):
+        raise DriverError(f"dxf chord_m: a distance > 0, not {chord_m!r}")
+    names = _Layers(layer_map, layers, path)
     opts = {
-        "symbol_code": int(symbol_code),
-        "line_code": int(line_code),
+        "default_code": None if default_code is None else int(default_code),
+        "point_code": int(point_code),
+        "line_code": 0 if default_code is None else int(default_code),
         "tolerance_m": tolerance_m,
         "topology": bool(topology),
-        "sagitta_m": sagitta_m,
-        "bulge_m": bulge,
+        "chord_m": chord,
     }
     data = _sniff(read_bytes(path), path)
     stats: Counter = Counter()
     got = _fast_read(data, path, names, opts, stats) if fast else None
     if got is None:
         stats.clear()
+        names = _Layers(layer_map, layers, path)
         header, collected = _slow_read(data, path, names, opts, stats, progress)
     else:
         header, collected = got
@@ -298,41 +323,60 @@ def read(
             m = MapFile(_map_id(path))
         if crs is not None:
             m.crs = crs
-    except ValueError as exc:  # RecordError
+    except ValueError as exc:  # RecordError, CRSError
         raise FormatError(f"map header: {exc}", path=path) from None
-    _report(path, stats)
+    _report(path, stats, names)
     opts["crs"] = m.crs  # tolerance_m is metres: the rebuild converts it to the CRS's units
     for ext, c in collected.items():
         m.add_layer(_make_layer(ext, c, opts, path))
     return m
 
 
-def _report(path, stats: Counter) -> None:
-    skipped = {k[5:]: v for k, v in stats.items() if k.startswith("skip:")}
-    if skipped:
-        log.info(
-            "%s: entities not read: %s",
-            path,
-            ", ".join(f"{k} x{v}" for k, v in sorted(skipped.items())),
+def _report(path, stats: Counter, names: _Layers) -> None:
+    """One warning per kind of entity not imported; the layer mapping at INFO."""
+    for key, n in sorted(stats.items()):
+        if not key.startswith("skip:") or key == "skip:layer":
+            continue
+        kind = key[5:]
+        reason = skip_reason(kind.split(" ")[0])
+        if kind.endswith("(no geometry)"):
+            reason = "ezdxf could not render its parts"
+        elif kind in ("POLYFACE", "POLYMESH"):
+            reason = "surfaces are not supported"
+        warn(log, f"{path}: {n} {kind} skipped ({reason})", "skipped", n, kind)
+    if stats["skip:layer"]:
+        log.info("%s: %d entities of layers not read (option)", path, stats["skip:layer"])
+    if stats["paper space"]:
+        warn(
+            log,
+            f"{path}: {stats['paper space']} paper-space entities skipped (only the model "
+            "space is map data)",
+            "skipped",
+            stats["paper space"],
+            "paper space",
         )
-    if stats["truncated"]:
-        log.warning(
-            "%s: %d texts longer than %d characters were truncated (first: %r)",
-            path,
-            stats["truncated"],
-            TEXT_LEN,
-            stats.get("first_truncated"),
+    if stats["controls"]:
+        warn(
+            log,
+            f"{path}: {stats['controls']} texts held control characters (tabs, line "
+            "breaks): read as blanks",
+            "changed",
+            stats["controls"],
+            "texts",
         )
     if stats["copied lines"]:
-        log.warning(
-            "%s: %d apygis line(s) repeat point numbers read before (copied in CAD): "
-            "read as new lines, their topology rebuilt",
-            path,
+        warn(
+            log,
+            f"{path}: {stats['copied lines']} apygis line(s) repeat point numbers read before "
+            "(copied in CAD): read as new lines, their topology rebuilt",
+            "renumbered",
             stats["copied lines"],
+            "lines",
         )
-    if stats["bulges"]:
+    mapped = {k: v for k, v in names.names.mapping().items() if v is None or k.lower() != v}
+    if mapped:
         log.info(
-            "%s: %d open polylines have arcs (bulges); read as their vertices only",
+            "%s: DXF layers -> map layers: %s",
             path,
-            stats["bulges"],
+            ", ".join(f"{k} -> {v or '(skipped)'}" for k, v in mapped.items()),
         )

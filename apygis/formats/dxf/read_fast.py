@@ -12,10 +12,10 @@ import numpy as np
 from apygis.formats._readguard import MAX_COORD, ascii_int
 from apygis.formats.dxf._collect import (
     _clean_text,
-    _Collect,
     _header_from_tags,
     _int_or_none,
     _own_text,
+    _point_code,
     _seed_layers,
     _symbol_code,
     _xyz,
@@ -102,17 +102,17 @@ def _fast_entities(text: str, header: dict, names, opts: dict, stats: Counter):
         if kind in keep:
             keep[kind](m.groups())
         pos = m.end()
+    present = [g[0] for g in inserts] + [t[0] for t in texts] + [v[0] for v in verts]
+    names.start(list(dict.fromkeys(present)), header)
     collected = _seed_layers(header, names)
-
-    def target(layer_name: str) -> _Collect | None:
-        ext = names(layer_name)
-        return None if ext is None else collected.setdefault(ext, _Collect())
+    target = names.collector(collected)
 
     for g in inserts:  # layer, block, x, y, z, 5 + 6 per ATTRIB (NUM, CODE, Z), layer
         c = target(g[0])
         if c is not None:
-            code = _symbol_code(g[16], g[1], opts["symbol_code"])
-            c.sym.append((_int_or_none(g[10]), *_xyz(g[2:5], "INSERT"), code))
+            pos3 = _xyz(g[2:5], "INSERT")
+            code = _symbol_code(g[16], g[1], _point_code(pos3[2], opts))
+            c.sym.append((_int_or_none(g[10]), *pos3, code))
     for layer_name, x, y, z, _h, raw, xd in texts:
         c = target(layer_name)
         own = _own_text(xd, raw, "TEXT")

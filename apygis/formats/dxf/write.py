@@ -43,7 +43,11 @@ from apygis.model.records import MAX_CODE
 # The file is UTF-8 (as every DXF from R2007 on), but ezdxf declares ANSI_1252.
 # GDAL's DXF driver ignores $ACADVER and decodes by $DWGCODEPAGE (ANSI_1252 as
 # Latin-1): ANSI_65001 (UTF-8) makes it read the texts as written; ezdxf and
-# AutoCAD read R2007+ files as UTF-8 whatever the code page. encode() swaps it.
+# AutoCAD read R2007+ files as UTF-8 whatever the code page. encode() declares
+# ANSI_65001 only for a file with characters beyond ASCII: GDAL builds whose
+# iconv lacks CP65001 (glibc's: Debian's GDAL 3.6, QGIS) recode every string
+# with a warning (keeping the UTF-8 text, which is right), and a pure ASCII
+# file reads the same in every code page, so it keeps ANSI_1252, warning-free.
 _CODEPAGE_EZDXF = "\n$DWGCODEPAGE\n  3\nANSI_1252\n"
 _CODEPAGE = "\n$DWGCODEPAGE\n  3\nANSI_65001\n"
 
@@ -427,9 +431,11 @@ def encode(map_: MapFile, library=None, dxfversion: str = "R2010", path=None, pr
     doc.entitydb.handles.reset(f"{h:X}")  # the handles above are taken
     buf = io.StringIO()
     doc.write(buf)
-    skeleton = buf.getvalue().replace(_CODEPAGE_EZDXF, _CODEPAGE, 1)
-    if _CODEPAGE not in skeleton:  # pragma: no cover - ezdxf's layout
+    skeleton = buf.getvalue()
+    if _CODEPAGE_EZDXF not in skeleton:  # pragma: no cover - ezdxf's layout
         raise FormatError("ezdxf wrote no $DWGCODEPAGE ANSI_1252", path=path)
+    if not (entities.isascii() and skeleton.isascii()):  # see _CODEPAGE
+        skeleton = skeleton.replace(_CODEPAGE_EZDXF, _CODEPAGE, 1)
     sec = skeleton.find(_ENTITIES_START)
     end = skeleton.find(_ENTITIES_END, sec)
     if sec < 0 or end != sec + len(_ENTITIES_START):  # pragma: no cover - ezdxf's layout
@@ -440,12 +446,11 @@ def encode(map_: MapFile, library=None, dxfversion: str = "R2010", path=None, pr
     return data
 
 
-def write(
-    map_: MapFile, path, progress=None, library=None, dxfversion: str = "R2010"
-) -> list[Path]:
+def write(map_: MapFile, path, progress=None, version: str = "R2010") -> list[Path]:
     """Write a map as one DXF file, atomically; returns ``[path]``.
 
-    See :func:`encode` for the options.
+    ``version``: ``"R2010"`` (default), ``"R2013"`` or ``"R2018"``; see
+    :func:`encode`. The symbol blocks are drawn from the user's symbol library.
     """
-    data = encode(map_, library=library, dxfversion=dxfversion, path=path, progress=progress)
+    data = encode(map_, dxfversion=version, path=path, progress=progress)
     return atomic_write_many({Path(path): data})

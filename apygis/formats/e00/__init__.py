@@ -20,25 +20,26 @@ holding coverage ``ZH1091``:
 Reading an E00 file written this way gives the map back record for record:
 point numbers, references, heights, codes and texts come from the INFO
 tables, X and Y from the arcs and labels. Any other vector E00 file
-(compressed or not, single or double precision) is read as one layer: arcs
-become lines whose topology is rebuilt by the model's one rebuild,
-:meth:`apygis.model.Layer.add_polylines` (its report logged), label points
-become symbols. Grid E00
-files (a ``GRD`` section) are refused.
+(compressed or not, single or double precision; line, point and polygon
+coverages) is read as GDAL reads it: arcs, polygons and label points as the
+map layers ``arc``, ``pal`` and ``lab`` (:mod:`~apygis.formats.e00.foreign`),
+the PRJ section translated as GDAL translates it. Grid E00 files (a ``GRD``
+section) are refused.
 
 GDAL's AVCE00 driver reads the files written here as layers ``ARC`` (the AAT
 items joined) and ``LAB`` (the PAT items joined).
 
 The package: :mod:`~apygis.formats.e00.write` (a map to E00 text),
 :mod:`~apygis.formats.e00.compress` (the decompressor of ``EXP  1`` files),
-:mod:`~apygis.formats.e00.parse` (E00 sections to plain arrays and INFO tables) and
-:mod:`~apygis.formats.e00.mapping` (those to the model: :func:`read`); ``_common``
+:mod:`~apygis.formats.e00.parse` (E00 sections to plain arrays and INFO tables),
+:mod:`~apygis.formats.e00.mapping` (those to the model: :func:`read`) and
+:mod:`~apygis.formats.e00.foreign` (coverages apygis did not write); ``_common``
 holds the constants they share.
 """
 
 from __future__ import annotations
 
-from apygis.formats import Driver
+from apygis.formats import READ_OPTIONS, Driver, Option
 from apygis.formats.e00._common import _TERM as _TERM
 from apygis.formats.e00._common import DEFAULT_LAYER
 from apygis.formats.e00._common import DOUBLE as DOUBLE
@@ -74,11 +75,28 @@ def probe(path) -> bool:
 
 DRIVER = Driver(
     name="e00",
-    description="ARC/INFO interchange file: one line coverage with INFO tables "
-    "(docs/formats/e00.md)",
+    description="ARC/INFO interchange file: writes a line coverage with INFO tables, reads "
+    "line, point and polygon coverages (docs/formats/e00.md)",
     extensions=("e00",),
     reader=read,
     writer=write,
     probe=probe,
     outputs=outputs,
+    stream=True,
+    options=(
+        *(
+            READ_OPTIONS[k]
+            for k in (
+                "layers",
+                "layer_map",
+                "tolerance_m",
+                "crs",
+                "code_field",
+                "default_code",
+                "point_code",
+            )
+        ),
+        Option("recover", "r", "bool", "read a damaged file as far as it goes"),
+        Option("precision", "w", "int", "2 single, 3 double precision", low=2, high=3),
+    ),
 )

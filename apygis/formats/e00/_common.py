@@ -23,7 +23,7 @@ _COVER_RE = re.compile(r"[^A-Z0-9_]")
 _SECTION_RE = re.compile(rb"^([A-Za-z0-9]{3})  ([0-9])\s*$")
 # sections apygis does not use, and the line that ends each
 _SKIP_UNTIL = {b"SIN": b"EOX", b"LOG": b"EOL", b"MTD": b"EOD"}
-_SKIP_TO_TERM = {b"PAL", b"CNT", b"TXT"}
+_SKIP_TO_TERM = {b"CNT", b"TXT"}
 _SUPER = {b"TX6", b"TX7", b"RXP", b"RPL"}
 
 

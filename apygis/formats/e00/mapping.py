@@ -12,17 +12,34 @@ import numpy as np
 from apygis.errors import DriverError, FormatError, RecordError
 from apygis.formats._io import read_bytes
 from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows, loads_json
+from apygis.formats._report import warn
 from apygis.formats.e00._common import DEFAULT_LAYER, T_BINFLOAT, T_FIXNUM, log
 from apygis.formats.e00.parse import _Table, decode
 from apygis.model import topology
 from apygis.model.map import MapFile, check_ext, check_map_id, check_text
 from apygis.model.records import LINE_DTYPE, MAX_CODE, NO_REF
+from apygis.model.symbols import IMPORTED_POINT
+
+
+def rebuild_report(path, ext: str, rep, what: str = "arcs") -> None:
+    """The topology rebuild's report: a warning when it refused or removed anything."""
+    text = f"{path}: layer {ext}: {what} rebuilt: {rep.message()}"
+    if rep.refused or rep.duplicates_removed or rep.empty:
+        warn(log, text, "rebuilt", None, "lines")
+    else:
+        log.info("%s", text)
 
 
 def _table(tables: list[_Table], suffix: str, path) -> _Table | None:
     found = [t for t in tables if t.name.upper().endswith(suffix)]
     if len(found) > 1:
-        log.warning("%s: %d tables *%s; using %s", path, len(found), suffix, found[0].name)
+        warn(
+            log,
+            f"{path}: {len(found)} tables *{suffix}; using {found[0].name}",
+            "skipped",
+            len(found) - 1,
+            "INFO tables",
+        )
     return found[0] if found else None
 
 
@@ -134,47 +151,79 @@ def _meta(tables, path) -> dict[str, Any]:
 
 
 def _crs_from_prj(entries: list[str] | None, path):
+    """The CRS of a PRJ section, as GDAL translates it; None (with a warning) if it cannot.
+
+    The section is ESRI WKT, or ARC/INFO's keyword form (``Projection
+    LAMBERT``, ``Datum``, ``Units``, ``Zone``, ``Parameters`` and their
+    values: UTM, State Plane, Lambert, Albers, Transverse Mercator,
+    Polyconic, geographic and the other projections of ARC/INFO). It is
+    translated by GDAL's own reader of E00 coverages (AVCE00, through
+    pyogrio), so that apygis and every GDAL-based GIS agree; a projection
+    GDAL cannot translate gives no CRS and a warning.
+    """
     if not entries:
         return None
     from pyproj import CRS
     from pyproj.exceptions import CRSError
 
     first = entries[0].lstrip().upper()
-    if first.startswith(("PROJCS", "GEOGCS", "GEOCCS", "COMPD_CS", "LOCAL_CS", "PROJCRS")):
+    if first.startswith(("PROJCS", "GEOGCS", "GEOCCS", "COMPD_CS", "PROJCRS", "GEOGCRS")):
         try:
             return CRS.from_wkt("".join(entries))
         except CRSError as exc:
-            log.warning("%s: PRJ section is not a readable WKT (%s); no CRS", path, exc)
+            warn(log, f"{path}: PRJ section is not a readable WKT ({exc}); no CRS", "crs")
             return None
-    keys = {}
-    for e in entries:
-        parts = e.split()
-        if len(parts) >= 2:
-            keys[parts[0].upper()] = parts[1].upper()
-    proj, datum = keys.get("PROJECTION"), keys.get("DATUM")
-    geo = {"NAD27": 4267, "NAD83": 4269, "WGS84": 4326}
-    code = None
-    if proj == "GEOGRAPHIC" and datum in geo:
-        code = geo[datum]
-    elif proj == "UTM" and datum in geo:
-        try:
-            zone = int(keys.get("ZONE", "0"))
-        except ValueError:
-            zone = 0
-        base = {"NAD27": 26700, "NAD83": 26900, "WGS84": 32600}[datum]
-        if 1 <= abs(zone) <= 60:
-            code = base + abs(zone) + (100 if zone < 0 and datum == "WGS84" else 0)
-    if code is None:
-        log.info("%s: PRJ section %s not translated; no CRS", path, keys)
+    wkt = _gdal_prj(entries)
+    if wkt is None or wkt.lstrip().upper().startswith(("LOCAL_CS", "ENGCRS", "ENGCS")):
+        shown = "; ".join(" ".join(e.split()) for e in entries[:4])
+        warn(log, f"{path}: PRJ section ({shown}) is not a projection GDAL knows; no CRS", "crs")
         return None
-    return CRS.from_epsg(code)
+    try:
+        return CRS.from_user_input(wkt)
+    except CRSError as exc:  # pragma: no cover - GDAL's own WKT
+        warn(log, f"{path}: the CRS of the PRJ section is not readable ({exc}); no CRS", "crs")
+        return None
 
 
-def _map_from(info: dict, meta: dict, path, layer_opt: str | None, tol: float) -> MapFile:
+def _gdal_prj(entries: list[str]) -> str | None:
+    """GDAL's CRS (``AUTH:CODE`` or WKT) of PRJ keyword lines, or None.
+
+    A minimal coverage (one arc and the PRJ section) in a temporary file read
+    by GDAL's AVCE00 driver, whose translation (OGRSpatialReference's
+    ``importFromESRI``) is the reference every GDAL-based program uses.
+    """
+    import os
+    import tempfile
+    import warnings
+
+    import pyogrio
+
+    term = f"{-1:10d}" + f"{0:10d}" * 6
+    arc = f"{1:10d}{1:10d}{1:10d}{1:10d}{0:10d}{0:10d}{2:10d}\n" + " 0.0000000E+00" * 2
+    arc += " 1.0000000E+00" * 2
+    lines = "".join(f"{e.rstrip()}\n~\n" for e in entries if "\n" not in e)
+    body = f"EXP  0 /PRJ.E00\nARC  2\n{arc}\n{term}\nPRJ  2\n{lines}EOP\nEOS\n"
+    with tempfile.TemporaryDirectory(prefix="apygis-prj-") as tmp:
+        probe = os.path.join(tmp, "prj.e00")
+        with open(probe, "w", encoding="latin-1", errors="replace") as fh:
+            fh.write(body)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                crs = pyogrio.read_info(probe, layer="ARC").get("crs")
+        except Exception as exc:  # GDAL could not read it: no CRS, said by the caller
+            log.debug("GDAL could not read the PRJ section: %s", exc)
+            return None
+    return crs if isinstance(crs, str) and crs else None
+
+
+def _map_from(info: dict, meta: dict, path, opts: dict) -> MapFile:
     tables = info["tables"]
     stem = re.sub(r"[^A-Za-z0-9_-]", "_", Path(path).stem if path else "E00")[:32] or "E00"
     try:
-        crs = meta.get("CRS") or _crs_from_prj(info["prj"], path)
+        crs = meta.get("CRS")
+        if crs is None:  # the option, else the PRJ section
+            crs = opts["crs"] if opts["crs"] is not None else _crs_from_prj(info["prj"], path)
         scale = meta.get("SCALE")
         mp = MapFile(check_map_id(meta.get("ID", stem)), scale=scale, crs=crs)
         mp.notes = meta.get("NOTES", "")
@@ -183,9 +232,23 @@ def _map_from(info: dict, meta: dict, path, layer_opt: str | None, tol: float) -
             mp.layer(ext)
     except (RecordError, ValueError) as exc:
         raise FormatError(f"map metadata: {exc}", path=path) from None
-    default = check_ext(layer_opt) if layer_opt else (layers[0] if layers else DEFAULT_LAYER)
-    _lines_to_map(info, tables, mp, default, path, tol)
+    if not meta:
+        from apygis.formats.e00.foreign import foreign_to_map
+
+        foreign_to_map(info, tables, mp, path, opts)
+        return mp
+    default = layers[0] if layers else DEFAULT_LAYER
+    _lines_to_map(info, tables, mp, default, path, opts["tolerance_m"])
     _labels_to_map(info, tables, mp, default, path)
+    if opts["layers"] is not None:  # a map apygis wrote: its source layers are map layers
+        from apygis.formats import select_layers
+
+        select_layers(mp, opts["layers"], path)
+    if opts["layer_map"]:
+        raise DriverError(
+            f"{path}: a map apygis wrote keeps its layers; a layer map applies to coverages "
+            "of other programs"
+        )
     return mp
 
 
@@ -229,8 +292,7 @@ def _lines_to_map(info, tables, mp: MapFile, default: str, path, tol: float) -> 
             _bad(aat, k, aat.raw("CODE")[1], path, "a code 0-99", str(codes[k]).encode())
     layer = mp.layer(default)
     rep = layer.add_polylines(xy, off, codes, snap_m=tol, crs=mp.crs)
-    say = log.warning if rep.refused or rep.duplicates_removed or rep.empty else log.info
-    say("%s: layer %s: arcs rebuilt: %s", path, layer.ext, rep.message())
+    rebuild_report(path, layer.ext, rep)
 
 
 def _lines_from_lpt(t: _Table, ids, off, xy, mp: MapFile, path) -> None:
@@ -291,7 +353,13 @@ def _labels_to_map(info, tables, mp: MapFile, default: str, path) -> None:
     if pat is None or not _need_items(pat, _PAT_ITEMS):
         nums = value
         if nums.min() < 0 or len(np.unique(nums)) != n:
-            log.warning("%s: label IDs negative or repeated; symbols numbered 1..%d", path, n)
+            warn(
+                log,
+                f"{path}: label IDs negative or repeated; symbols numbered 1..{n}",
+                "renumbered",
+                n,
+                "symbols",
+            )
             nums = np.arange(1, n + 1)
         z = np.zeros(n)
         if pat is not None and pat.has("HEIGHT"):
@@ -355,7 +423,12 @@ def read(
     progress=None,
     recover: bool = False,
     tolerance_m: float = 0.005,
-    layer: str | None = None,
+    layer_map=None,
+    layers=None,
+    crs=None,
+    code_field: str | None = "code",
+    default_code: int | None = None,
+    point_code: int = IMPORTED_POINT,
 ) -> MapFile:
     """Read an E00 file (compressed or not) into a map.
 
@@ -370,9 +443,20 @@ def read(
     tolerance_m : float
         For files apygis did not write: distance within which arc ends join
         other arcs when the line topology is rebuilt.
-    layer : str, optional
-        For files apygis did not write: the layer extension of their records
-        (default ``"a"``).
+    layer_map, layers : optional
+        For files apygis did not write: the coverage's parts ``ARC`` (arcs),
+        ``PAL`` (polygons) and ``LAB`` (label points) are its source layers,
+        mapped to the map layers ``arc``, ``pal`` and ``lab`` unless
+        ``layer_map`` says otherwise; ``layers`` reads only some of them.
+    crs : optional
+        The CRS of a coverage without a PRJ section (or instead of it).
+    code_field : str or None
+        The AAT / PAT item holding codes 0-99 (compared without regard to case).
+    default_code : int or None
+        Code of features whose code item is missing or not 0-99 (counted and
+        reported); None refuses codes outside 0-99 and gives lines 00.
+    point_code : int
+        Code of label points without a code (default 90, imported point).
 
     Returns
     -------
@@ -390,11 +474,29 @@ def read(
         tol = math.nan
     if not math.isfinite(tol) or tol < 0:
         raise DriverError(f"tolerance_m is a distance in metres >= 0, not {tolerance_m!r}")
+    for name, value in (("default_code", default_code), ("point_code", point_code)):
+        if value is None and name == "default_code":
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise DriverError(f"e00 {name}: an integer 0-{MAX_CODE}, not {value!r}")
+        if not 0 <= value <= MAX_CODE:
+            raise DriverError(f"e00 {name}: {value} is outside 0-{MAX_CODE}")
+    from apygis.formats._layers import parse_layer_map
+
+    opts = {
+        "tolerance_m": tol,
+        "layer_map": parse_layer_map(layer_map),
+        "layers": layers,
+        "crs": crs,
+        "code_field": code_field,
+        "default_code": default_code,
+        "point_code": int(point_code),
+    }
     info = decode(read_bytes(path), path, recover=recover)
     if progress:
         progress(1, 2)
     meta = _meta(info["tables"], path)
-    mp = _map_from(info, meta, path, layer, tol)
+    mp = _map_from(info, meta, path, opts)
     if progress:
         progress(2, 2)
     return mp

@@ -10,6 +10,7 @@ import numpy as np
 
 from apygis.errors import FormatError
 from apygis.formats._readguard import MAX_COORD, ascii_int, bad_coord_rows
+from apygis.formats._report import warn
 from apygis.formats.e00._common import (
     _MAX_COUNT,
     _SECTION_RE,
@@ -238,8 +239,55 @@ def _parse_labels(cur: _Cursor, prec: int, out: dict) -> None:
         lab["xy"].append(xy)
 
 
+def _parse_pal(cur: _Cursor, prec: int, out: dict) -> None:
+    """PAL section (polygon arc lists): per polygon, its arc entries until the end line.
+
+    A polygon record is a header (arc count, then the polygon's box: one line
+    in single precision, two in double) and its arcs, three integers each
+    (arc number, negative when the arc is walked backwards; from node;
+    polygon on the other side), two arcs a line; an arc number 0 separates
+    the rings of islands. Polygon 1 is the outside ("universe") polygon.
+    """
+    width = 21 if prec == DOUBLE else 14
+    pal = out["pal"]
+    while True:
+        line = cur.next("PAL section")
+        ln = cur.i
+        if line.startswith(_TERM):
+            if prec == DOUBLE and cur.i < len(cur.lines) and cur.lines[cur.i].startswith(b" 0.0"):
+                cur.i += 1
+            return
+        if len(line) < 10 + 2 * width:
+            cur.fail(
+                "PAL record: expected the arc count (10 columns) and the polygon's box "
+                f"({width} columns per number), found {line[:80]!r}"
+            )
+        (narcs,) = _ints([line[:10]], cur, ln, "PAL record")
+        if not 0 <= narcs <= _MAX_COUNT:
+            cur.fail(f"PAL record: arc count {narcs} is out of range")
+        if prec == DOUBLE:
+            cur.next("PAL record (second line of its box)")
+        nrows = (narcs + 1) // 2
+        cur.need(nrows, f"polygon {len(pal) + 1} ({narcs} arcs)")
+        rows = cur.lines[cur.i : cur.i + nrows]
+        first = cur.i + 1
+        cur.i += nrows
+        need = [30 if k == nrows - 1 and narcs % 2 else 60 for k in range(nrows)]
+        short = [k for k, r in enumerate(rows) if len(r.rstrip()) < need[k]]
+        if short:
+            k = short[0]
+            cur.fail(
+                "PAL arcs: expected arc, node and polygon numbers in 10 columns each, "
+                f"found {rows[k][:80]!r}",
+                first + k,
+            )
+        vals = _fixed_ints(rows, np.arange(first, first + nrows), 10, 6, cur, "PAL arcs")
+        pal.append(vals.reshape(-1, 3)[:narcs])
+
+
 def _fixed_ints(rows: list[bytes], lines: np.ndarray, width: int, nvals: int, cur, what):
     fields = _fixed_fields(rows, width, nvals)
+    fields = np.where(np.char.strip(fields) == b"", b"0", fields)  # a blank field is 0
     try:
         return fields.astype(np.int64)
     except (ValueError, OverflowError):
@@ -356,7 +404,8 @@ def _split_e00(data: bytes, path) -> tuple[list[bytes], str]:
 
 
 def decode(data: bytes, path=None, recover: bool = False) -> dict:
-    """Parse E00 bytes into sections: ``arcs``, ``labels``, ``prj``, ``tables``, ``precision``.
+    """Parse E00 bytes into sections: ``arcs``, ``labels``, ``pal``, ``prj``, ``tables``,
+    ``precision``.
 
     With ``recover``, a file that ends early or breaks off in a section
     gives what was read before the damage (a warning names it) instead of
@@ -369,6 +418,7 @@ def decode(data: bytes, path=None, recover: bool = False) -> dict:
         "arcs": {"heads": [], "xy": [], "lens": []},
         "labels": {"ids": [], "poly": [], "xy": []},
         "prj": None,
+        "pal": [],
         "tables": [],
         "precision": None,
     }
@@ -377,7 +427,7 @@ def decode(data: bytes, path=None, recover: bool = False) -> dict:
     except FormatError as exc:
         if not recover:
             raise
-        log.warning("%s; kept what was read before (recover=True)", exc)
+        warn(log, f"{exc}; kept what was read before (recover=True)", "damaged")
         out["damaged"] = str(exc)
     return out
 
@@ -410,6 +460,8 @@ def _decode_sections(cur: _Cursor, out: dict) -> None:
             out["precision"] = prec
         elif name == b"LAB":
             _parse_labels(cur, prec, out)
+        elif name == b"PAL":
+            _parse_pal(cur, prec, out)
         elif name == b"TOL":
             _skip_to_term(cur, "TOL section", False)
         elif name == b"PRJ":

@@ -124,6 +124,10 @@ def _text_lines(lines: list[str]) -> bytes:
 # --------------------------------------------------------------------------- INFO tables
 
 
+MAX_TEXT_BYTES = 320
+"""The widest INFO character item (bytes of UTF-8): the longest text E00 holds."""
+
+
 @dataclass
 class _Item:
     name: str
@@ -409,7 +413,16 @@ def encode(map_: MapFile, path=None, precision: int = DOUBLE) -> bytes:
                 labels["text"] += [b""] * len(t)
             else:
                 labels["code"] += [0] * len(t)
-                labels["text"] += [s.encode("utf-8") for s in t["text"].tolist()]
+                texts = [s.encode("utf-8") for s in t["text"].tolist()]
+                long = [k for k, b in enumerate(texts) if len(b) > MAX_TEXT_BYTES]
+                if long:
+                    k = long[0]
+                    raise ValueRangeError(
+                        f"layer {lay.ext}: text {t['num'][k]} has {len(texts[k])} bytes; an INFO "
+                        f"character item holds at most {MAX_TEXT_BYTES}",
+                        path=path,
+                    )
+                labels["text"] += texts
     parts = [f"EXP  0 /{cover}.E00\n".encode()]
     arc_bytes, length, nodes = _arc_section(arcs, precision)
     parts += [arc_bytes, _lab_section(labels, precision), _tol_section(precision)]

@@ -57,7 +57,7 @@ from typing import Any
 import numpy as np
 
 from apygis.errors import DriverError, FormatError
-from apygis.formats import Driver
+from apygis.formats import READ_OPTIONS, Driver, Option
 from apygis.formats._io import (
     check_target,
     commit,
@@ -68,6 +68,8 @@ from apygis.formats._io import (
     stamp_path,
     write_failed,
 )
+from apygis.formats._layers import LayerNames, parse_layer_map
+from apygis.formats._report import warn
 from apygis.formats.ogr._common import _rec, log
 from apygis.formats.ogr.edits import _EditReport, _line_edits, _relink
 from apygis.formats.ogr.reader import (
@@ -89,11 +91,9 @@ from apygis.formats.ogr.schema import (
     MAP_TABLE,
     SCHEMA_VERSION,
     _default_id,
-    _fallback_exts,
     _fmt,
     _Format,
     _member_files,
-    _parse_layer_map,
     _parse_name,
     _schema_files,
     _split_target,
@@ -109,6 +109,7 @@ from apygis.formats.ogr.writer import (
 )
 from apygis.model.map import Layer, MapFile, check_map_id, crs_string
 from apygis.model.records import MAX_CODE
+from apygis.model.symbols import IMPORTED_POINT
 
 __all__ = [
     "FGB",
@@ -138,7 +139,15 @@ def outputs(map_: MapFile, path, fmt="gpkg") -> list[Path]:
     ]
 
 
-def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = True) -> list[Path]:
+def write(
+    map_: MapFile,
+    path,
+    fmt="gpkg",
+    progress=None,
+    spatial_index: bool = True,
+    version: str | None = None,
+    styles: bool = True,
+) -> list[Path]:
     """Write ``map_`` in an OGR format, atomically; returns the files written.
 
     Parameters
@@ -157,6 +166,12 @@ def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = 
         GeoPackage only: give every spatial layer an R-tree index (GDAL's
         default). Without, a map of many layers is written about a third
         faster; GIS programs draw small layers as fast either way.
+    version : str, optional
+        GeoPackage only: ``"1.2"`` (default, which GDAL 3.6 and QGIS LTR
+        builds open without warnings), ``"1.3"`` or ``"1.4"``.
+    styles : bool
+        GeoPackage only: QGIS styles in ``layer_styles`` and descriptions
+        in ``gpkg_contents`` (default; :mod:`apygis.formats.ogr.styles`).
 
     Returns
     -------
@@ -165,6 +180,8 @@ def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = 
     fmt = _fmt(fmt)
     if fmt.multi and not spatial_index:
         fmt = replace(fmt, layer_options={**fmt.layer_options, "SPATIAL_INDEX": "NO"})
+    if version is not None and version not in ("1.2", "1.3", "1.4"):
+        raise DriverError(f"GeoPackage version {version!r}: 1.2, 1.3 or 1.4")
     crs = crs_string(map_.crs)
     if fmt.multi:
         target = Path(path)
@@ -198,13 +215,14 @@ def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = 
             with _sqlite_unsynced(fmt):
                 _write_tables(
                     tmp,
-                    fmt,
+                    fmt if version is None else replace(fmt, dataset_version=version),
                     tables,
                     names,
                     target.name if fmt.multi else None,
                     crs,
                     progress,
                     target.parent if fmt.multi else directory,
+                    _gpkg_extras(map_, tables, styles) if fmt.multi else None,
                 )
             if fmt.multi:
                 _fsync(tmp / target.name)
@@ -230,6 +248,28 @@ def write(map_: MapFile, path, fmt="gpkg", progress=None, spatial_index: bool = 
         return [directory / n for n in made]
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _gpkg_extras(map_: MapFile, tables, styles: bool) -> dict:
+    """Descriptions of every table and, with ``styles``, QGIS styles of the spatial ones."""
+    from apygis.formats.ogr import styles as st
+
+    desc, qml = {}, {}
+    library = None
+    for t in tables:
+        parsed = _parse_name(t.name)
+        if parsed is None:
+            continue
+        _, ext, kind = parsed
+        desc[t.name] = st.description(t.name, kind, ext, map_.id)
+        if styles and kind != "map":
+            codes = map_.layers[ext].symbols["code"].tolist() if kind == "symbols" else ()
+            if kind == "symbols" and library is None:
+                from apygis.model.symbols import load_library
+
+                library = load_library()
+            qml[t.name] = st.qml(kind, ext, codes, library)
+    return {"descriptions": desc, "styles": qml}
 
 
 def members(path, fmt) -> tuple[Path, list[Path], bool] | None:
@@ -260,10 +300,13 @@ def read(
     path,
     fmt="gpkg",
     layer_map=None,
+    layers=None,
     tolerance_m: float = 0.005,
-    default_code: int = 0,
+    default_code: int | None = None,
     code_field: str | None = "code",
     text_field: str | None = "text",
+    point_code: int = IMPORTED_POINT,
+    crs=None,
     progress=None,
 ) -> MapFile:
     """Read a map from an OGR dataset.
@@ -279,24 +322,37 @@ def read(
     fmt : str
         ``"gpkg"``, ``"shp"``, ``"geojson"`` or ``"fgb"``.
     layer_map : dict or str, optional
-        OGR layer name -> map layer extension (``{"roads": "r"}`` or
-        ``"roads=r,rivers=h"``). Default: the extension in an apygis name
-        (``r_lines`` -> ``r``), else ``x``, ``y``, ``z``, ``xa``, ... in order.
+        OGR layer name -> map layer extension, or None / ``"-"`` to skip it
+        (``{"roads": "r"}`` or ``"roads=r,rivers=h"``); a name the dataset
+        does not have is refused. Other layers: the extension in an apygis
+        name (``r_lines`` -> ``r``), else one map layer per OGR layer named
+        from it (:mod:`apygis.formats._layers`).
+    layers : list of str, optional
+        Read only these OGR layers (one the dataset lacks is refused).
     tolerance_m : float
         Distance in metres within which line ends of foreign lines join (see
         :func:`apygis.model.polylines.rebuild`).
-    default_code : int
-        Code of foreign points and lines without a code field (or with NULL).
+    default_code : int or None
+        Code of foreign features whose code field is missing, NULL or not
+        0-99 (the latter counted and reported). None: codes outside 0-99 are
+        refused; lines without a code get 00, points 00 (spot height) where
+        they have a height (Z, not 0), else ``point_code``.
     code_field, text_field : str or None
-        Field names for codes and texts in foreign layers (None: not used).
+        Field names for codes and texts in foreign layers (None: not used;
+        compared without regard to case).
+    point_code : int
+        Code of foreign points without a code or a height (default 90,
+        "imported point").
+    crs : optional
+        The CRS of data that has none (or instead of the dataset's).
     progress : callable, optional
         ``progress(done, total)`` after each OGR layer.
 
     Edits a GIS user made to a file apygis wrote are taken: ``L_lines`` /
     ``L_areas`` win over ``L_line_points`` (deleted, changed and new lines;
     unchanged ones keep their exact topology), ``L_symbols`` / ``L_texts``
-    features without ``num`` get new numbers. What was taken is logged as one
-    WARNING per map layer (docs/formats/ogr.md, "Edited files").
+    features without ``num`` get new numbers. What was taken is reported as
+    one warning per map layer (docs/formats/ogr.md, "Edited files").
 
     Returns
     -------
@@ -309,26 +365,35 @@ def read(
         not fit (the message names the file, the layer and the feature).
     """
     fmt = _fmt(fmt)
-    lmap = _parse_layer_map(layer_map)
-    if isinstance(default_code, bool) or not isinstance(default_code, (int, np.integer)):
-        raise DriverError(f"default_code is an integer 0-{MAX_CODE}, not {default_code!r}")
-    if not 0 <= default_code <= MAX_CODE:
-        raise DriverError(f"default_code is 0-{MAX_CODE}, not {default_code}")
+    lmap = parse_layer_map(layer_map)
+    for name, value in (("default_code", default_code), ("point_code", point_code)):
+        if value is None and name == "default_code":
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise DriverError(f"{name} is an integer 0-{MAX_CODE}, not {value!r}")
+        if not 0 <= value <= MAX_CODE:
+            raise DriverError(f"{name} is 0-{MAX_CODE}, not {value}")
     opts: dict[str, Any] = {
-        "default_code": int(default_code),
+        "default_code": None if default_code is None else int(default_code),
         "code_field": code_field,
         "text_field": text_field,
+        "point_code": int(point_code),
     }
     sources, default_id = _sources(path, fmt)
+    present = [src.name for src in sources]
+    # apygis's own names keep their map layer; the others are named from themselves
+    own = [src.name for src in sources if _parse_name(src.name)]
+    names = LayerNames(lmap, [n for n in present if n not in own], where=path)
+    names.check_used(present)
+    groups: dict[str, list[str]] = {}
+    for n in own:
+        parsed = _parse_name(n)
+        if parsed is not None and parsed[2] != "map":
+            groups.setdefault(parsed[1], []).append(n)
+    chosen = names.select(layers, present, groups)
 
     # which map layer and kind each source is
     plan = []
-    taken = set(lmap.values())
-    for src in sources:
-        parsed = _parse_name(src.name)
-        if parsed is not None and parsed[2] != "map":
-            taken.add(parsed[1])
-    fallback = _fallback_exts(taken)
     header_src = None
     prefixes = set()
     for src in sources:
@@ -338,14 +403,17 @@ def read(
             header_src = header_src or src
             prefixes.add(parsed[0])
             continue
+        if chosen is not None and src.name.upper() not in chosen:
+            continue
         if not src.spatial and parsed is None:
             log.info("%s: layer %s has no geometry; skipped", src.dataset, src.name)
             continue
-        ext = lmap.get(src.name) or next(
-            (e for n, e in lmap.items() if n.lower() == src.name.lower()), None
-        )
+        mapped = next((v for k, v in lmap.items() if k.upper() == src.name.upper()), "")
+        if mapped is None:
+            continue  # skipped by the layer map
+        ext = mapped or (parsed[1] if parsed else names(src.name))
         if ext is None:
-            ext = parsed[1] if parsed else next(fallback)
+            continue
         if parsed:
             prefixes.add(parsed[0])
         plan.append((src, ext, kind))
@@ -367,7 +435,7 @@ def read(
     foreign: dict[str, _Foreign] = {}
     edited: dict[str, dict[str, tuple]] = {}  # ext -> kind -> (wkb, columns, source)
     reports: dict[str, _EditReport] = {}
-    order: list[str] = list(header["layers"]) if header else []
+    order: list[str] = list(header["layers"]) if header and chosen is None else []
     layer_crs = None
     for src, ext, kind in plan:
         meta, wkb, columns = _read_layer(src)
@@ -382,7 +450,8 @@ def read(
                     f"a second {kind} layer for map layer {ext}", src.dataset, _rec(src.name)
                 )
             report = reports.setdefault(ext, _EditReport())
-            tables[kind] = _exact_table(kind, wkb, columns, src, opts["default_code"], report)
+            code0 = opts["default_code"] if opts["default_code"] is not None else 0
+            tables[kind] = _exact_table(kind, wkb, columns, src, code0, report)
         elif kind in ("lines", "areas") and ext in exact_lines:
             kinds = edited.setdefault(ext, {})
             if kind in kinds:
@@ -397,13 +466,16 @@ def read(
             progress(done, total)
 
     if header is not None:
-        map_id, scale, crs, notes = header["id"], header["scale"], header["crs"], header["notes"]
+        map_id, scale, map_crs = header["id"], header["scale"], header["crs"]
+        notes = header["notes"]
     else:
         (only,) = prefixes if len(prefixes) == 1 else (None,)
         stem = only if only is not None else default_id
-        map_id, scale, crs, notes = _default_id(stem), None, layer_crs, ""
+        map_id, scale, map_crs, notes = _default_id(stem), None, _known_crs(layer_crs), ""
+    if crs is not None:
+        map_crs = crs
     try:
-        m = MapFile(check_map_id(map_id), scale=scale, crs=crs, notes=notes)
+        m = MapFile(check_map_id(map_id), scale=scale, crs=map_crs, notes=notes)
     except ValueError as exc:
         raise FormatError(f"map header: {exc}", path=path) from None
 
@@ -431,9 +503,20 @@ def read(
         if relinks:
             lay = _relink(lay, relinks, report)
         if report.parts:
-            log.warning("%s: layer %s: edits taken: %s", path, ext, report.message())
+            warn(log, f"{path}: layer {ext}: edits taken: {report.message()}", "edited")
         m.add_layer(lay)
     return m
+
+
+def _known_crs(crs):
+    """The CRS GDAL reports for a layer, or None for the "unknown" CRS apygis writes
+    into a GeoJSON of a map without one (GDAL would otherwise assume WGS 84)."""
+    if not isinstance(crs, str):
+        return None
+    head = crs.lstrip().upper()
+    if head.startswith(("LOCAL_CS", "ENGCRS", "ENGCS")) and "UNKNOWN" in head[:40]:
+        return None
+    return crs
 
 
 def _head(p: Path, n: int) -> bytes:
@@ -503,6 +586,26 @@ def _driver(fmt: _Format, description: str, probe: Callable) -> Driver:
 
     reader.__doc__ = f"Read a map from {fmt.ogr} (see :func:`apygis.formats.ogr.read`)."
     writer.__doc__ = f"Write a map as {fmt.ogr} (see :func:`apygis.formats.ogr.write`)."
+    read_opts = tuple(
+        READ_OPTIONS[k]
+        for k in (
+            "layers",
+            "layer_map",
+            "tolerance_m",
+            "crs",
+            "code_field",
+            "default_code",
+            "text_field",
+            "point_code",
+        )
+    )
+    write_opts: tuple[Option, ...] = ()
+    if fmt.multi:
+        write_opts = (
+            Option("version", "w", "choice", "GeoPackage version", choices=("1.2", "1.3", "1.4")),
+            Option("spatial_index", "w", "bool", "an R-tree index per spatial layer (default YES)"),
+            Option("styles", "w", "bool", "QGIS styles in layer_styles (default YES)"),
+        )
     return Driver(
         name=fmt.name,
         description=description,
@@ -512,6 +615,7 @@ def _driver(fmt: _Format, description: str, probe: Callable) -> Driver:
         probe=probe,
         outputs=outs,
         members=None if fmt.multi else set_members,
+        options=read_opts + write_opts,
     )
 
 

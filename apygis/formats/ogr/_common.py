@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import re
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -20,7 +21,7 @@ import numpy as np
 
 from apygis.errors import FormatError
 from apygis.model.map import check_text
-from apygis.model.records import MAX_CODE, NO_REF, TEXT_DTYPE
+from apygis.model.records import MAX_CODE, NO_REF
 
 log = logging.getLogger("apygis.formats.ogr")  # one logger for the package (the edits report)
 
@@ -45,8 +46,20 @@ def _gdal(call: Callable, what: str, path, layer: str | None = None, error=Forma
     except MemoryError:
         raise error(f"{what}: out of memory", path=path, record=_rec(layer)) from None
     except Exception as exc:  # pyogrio.errors.*, RuntimeError, ValueError, OSError, ...
-        msg = str(exc).strip() or type(exc).__name__
+        msg = _plain(str(exc).strip()) or type(exc).__name__
         raise error(f"{what}: {msg}", path=path, record=_rec(layer)) from None
+
+
+_HINT = re.compile(r";?\s*It might help to specify the correct driver.*$", re.S)
+_NOT_RECOGNISED = re.compile(r"^'[^']*' not recognized as being in a supported file format\.?")
+
+
+def _plain(msg: str) -> str:
+    """GDAL's message without what only GDAL's own tools take (``'<DRIVER>:' prefixes``)
+    or what repeats the path (named before it)."""
+    msg = _HINT.sub("", msg).strip()
+    msg = _NOT_RECOGNISED.sub("GDAL does not recognise its content", msg)
+    return msg.rstrip(";. ")
 
 
 class _WriteError(FormatError):
@@ -99,7 +112,7 @@ def _int_column(values, name: str, src: _Source, nullable: bool = False) -> np.n
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
             raise FormatError(
-                f"feature {k + 1}: field {name} is {a[k]!r}, expected an integer",
+                f"feature {k + 1}: field {name} is {a[k].item()!r}, expected an integer",
                 src.dataset,
                 _rec(src.name),
             )
@@ -161,7 +174,8 @@ def _null_mask(values) -> np.ndarray:
 
 
 def _texts(values, name: str, src: _Source) -> np.ndarray:
-    out = np.empty(len(values), dtype=TEXT_DTYPE["text"])
+    """A text column as an object array of ``str`` (whole: the model has no length limit)."""
+    out = np.empty(len(values), dtype=object)
     for k, v in enumerate(values):
         if v is None:
             v = ""

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from apygis.errors import FormatError
+from apygis.formats._report import warn
 from apygis.formats.ogr._common import _field, _int_column, _null_mask, _rec, _Source, _xyz, log
 from apygis.formats.ogr.reader import _Foreign, _foreign_layer
 from apygis.formats.ogr.schema import _points_text
@@ -101,10 +102,11 @@ def _line_edits(
         geoms = np.asarray(_from_wkb(wkb, src.dataset, src.name), dtype=object)
         pcol = _field(columns, "points")
         if pcol is None:
-            log.warning(
-                "%s: layer %s has no field points: its features are taken as new lines",
-                src.dataset,
-                src.name,
+            warn(
+                log,
+                f"{src.dataset}: layer {src.name} has no field points: its features are taken "
+                "as new lines",
+                "edited",
             )
         ccol = _field(columns, "code")
         codes = (

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from apygis.errors import FormatError
+from apygis.formats._report import warn
 from apygis.formats.ogr._common import (
     _codes,
     _field,
@@ -34,7 +35,15 @@ from apygis.formats.ogr.schema import SCHEMA_VERSION, _Format, _member_files, _p
 from apygis.formats.ogr.wkb import _from_wkb, _point_coords
 from apygis.model.map import Layer, check_ext
 from apygis.model.polylines import to_csr
-from apygis.model.records import LINE_DTYPE, REF_FIELDS, SYMBOL_DTYPE, TEXT_DTYPE, next_numbers
+from apygis.model.records import (
+    LINE_DTYPE,
+    MAX_CODE,
+    REF_FIELDS,
+    SYMBOL_DTYPE,
+    TEXT_DTYPE,
+    next_numbers,
+)
+from apygis.model.symbols import SPOT_HEIGHT
 
 if TYPE_CHECKING:  # edits.py imports this module
     from apygis.formats.ogr.edits import _EditReport
@@ -256,6 +265,45 @@ def _explode(geoms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return parts[order], idx[order]
 
 
+def _foreign_codes(columns: dict, n: int, src: _Source, opts: dict):
+    """The code of each of ``n`` features from ``code_field``, and a mask of those without.
+
+    NULL or no such field: no code. A value outside 0-99 takes ``default_code``
+    (counted and reported) or, without it, is refused naming the feature.
+    """
+    name = opts["code_field"]
+    col = _field(columns, name)
+    missing = np.ones(n, dtype=bool)
+    codes = np.zeros(n, dtype=np.int64)
+    if col is None:
+        return codes, missing
+    null = _null_mask(col)
+    vals = _int_column(col, name, src, nullable=True)
+    bad = ~null & ((vals < 0) | (vals > MAX_CODE))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        default = opts["default_code"]
+        if default is None:
+            raise FormatError(
+                f"feature {k + 1}: {name} {vals[k]} is not a code 0-99 (give a default code "
+                "for such features, or name another code field)",
+                src.dataset,
+                _rec(src.name),
+            )
+        warn(
+            log,
+            f"{src.dataset}: layer {src.name}: {int(bad.sum())} features have {name} outside "
+            f"0-99 (e.g. {vals[k]}): given the default code {default}",
+            "recoded",
+            int(bad.sum()),
+            src.name,
+        )
+        vals = np.where(bad, default, vals)
+    codes[~null] = vals[~null]
+    missing = null
+    return codes, missing
+
+
 def _foreign_layer(wkb, columns: dict, src: _Source, acc: _Foreign, opts: dict) -> None:
     import shapely
 
@@ -267,11 +315,10 @@ def _foreign_layer(wkb, columns: dict, src: _Source, acc: _Foreign, opts: dict) 
     if len(parts) == 0:
         return
     tid = shapely.get_type_id(parts)
-    code_col = _field(columns, opts["code_field"])
-    if code_col is not None:
-        codes = _codes(code_col, opts["code_field"], src, default=opts["default_code"])
-    else:
-        codes = np.full(len(geoms), opts["default_code"], dtype=np.int16)
+    codes, missing = _foreign_codes(columns, len(geoms), src, opts)
+    default = opts["default_code"]
+    if default is not None:
+        codes = np.where(missing, default, codes)
     text_col = _field(columns, opts["text_field"])
     kinds_known = np.isin(tid, (0, 1, 2, 3))
     if not kinds_known.all():
@@ -291,7 +338,11 @@ def _foreign_layer(wkb, columns: dict, src: _Source, acc: _Foreign, opts: dict) 
                 )
             )
         else:
-            acc.symbols.append((xyz, codes[feat[pts]]))
+            pcodes = codes[feat[pts]].copy()
+            if default is None:  # no code: a spot height where a height is known
+                none = missing[feat[pts]]
+                pcodes[none] = np.where(xyz[none, 2] != 0, SPOT_HEIGHT, opts["point_code"])
+            acc.symbols.append((xyz, pcodes.astype(np.int16)))
 
     lines = (tid == 1) | (tid == 2)
     polys = tid == 3
@@ -401,8 +452,11 @@ def _add_foreign(lay: Layer, acc: _Foreign, tolerance_m, path, crs=None) -> Laye
                 snap_m=tolerance_m,
                 crs=crs,  # tolerance_m metres in the CRS's units (degrees for lon/lat)
             )
-            say = log.warning if rep.refused or rep.duplicates_removed or rep.empty else log.info
-            say("%s: layer %s: lines rebuilt: %s", path, lay.ext, rep.message())
+            text = f"{path}: layer {lay.ext}: lines rebuilt: {rep.message()}"
+            if rep.refused or rep.duplicates_removed or rep.empty:
+                warn(log, text, "rebuilt", None, "lines")
+            else:
+                log.info("%s", text)
     except FormatError:
         raise
     except (ValueError, TypeError) as exc:  # a bad tolerance_m, a record the model refuses

@@ -10,14 +10,13 @@ the file names of the single-layer formats' sets, the ``points`` field of
 from __future__ import annotations
 
 import re
-import string
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from apygis.errors import DriverError
-from apygis.model.map import MapFile, check_ext
+from apygis.model.map import MapFile
 
 SCHEMA_VERSION = 1
 
@@ -61,6 +60,7 @@ class _Format:
     multi: bool  # one file holds every OGR layer (GeoPackage)
     layer_options: dict = field(default_factory=dict)
     containers: tuple[str, ...] = ()  # multi-layer files this driver also reads (zip)
+    dataset_version: str | None = None  # GeoPackage: the VERSION written (None: the default)
 
     @property
     def ext(self) -> str:
@@ -73,14 +73,8 @@ _GPKG = _Format("gpkg", "GPKG", ("gpkg",), multi=True)
 _SHP = _Format("shp", "ESRI Shapefile", ("shp",), multi=False, containers=("shz", "zip"))
 
 
-# 17 significant digits: every float64 comes back bit for bit (GDAL writes 15 decimals)
-_GEOJSON = _Format(
-    "geojson",
-    "GeoJSON",
-    ("geojson", "json"),
-    multi=False,
-    layer_options={"SIGNIFICANT_FIGURES": "17"},
-)
+# written by apygis.formats.ogr.geojson (RFC 7946 in EPSG:4326; every float64 exactly)
+_GEOJSON = _Format("geojson", "GeoJSON", ("geojson", "json"), multi=False)
 
 
 # no spatial index: it would reorder the features (and refuses NULL geometries)
@@ -160,38 +154,6 @@ def _member_files(directory: Path, fmt: _Format, prefix: str | None) -> list[Pat
         if member and (prefix is None or (parsed is not None and parsed[0] == prefix)):
             files.append(p)
     return files
-
-
-def _parse_layer_map(layer_map) -> dict[str, str]:
-    if layer_map is None:
-        return {}
-    if isinstance(layer_map, str):
-        pairs = {}
-        for item in layer_map.split(","):
-            if not item.strip():
-                continue
-            name, sep, ext = item.partition("=")
-            if not sep:
-                raise DriverError(f"layer_map: {item!r} is not NAME=EXT")
-            pairs[name.strip()] = ext.strip()
-        layer_map = pairs
-    if not isinstance(layer_map, dict):
-        raise DriverError(f"layer_map is a dict or 'NAME=EXT,...', not {layer_map!r}")
-    out = {}
-    for name, ext in layer_map.items():
-        try:
-            out[str(name)] = check_ext(ext)
-        except ValueError as exc:
-            raise DriverError(f"layer_map: {name}: {exc}") from None
-    return out
-
-
-def _fallback_exts(taken: set[str]):
-    first = ["x", "y", "z"]
-    more = [a + b for a in "xyz" for b in string.ascii_lowercase]
-    for e in first + more:
-        if e not in taken:
-            yield e
 
 
 def _default_id(stem: str) -> str:

@@ -8,6 +8,7 @@ coordinate is checked (finite, within ``MAX_COORD``) before it reaches the model
 
 from __future__ import annotations
 
+import re
 import struct
 
 import numpy as np
@@ -103,6 +104,46 @@ def _point_coords_slow(wkb: np.ndarray, path, layer: str) -> np.ndarray:
     return xyz
 
 
+_SURFACES = {15: "polyhedral surface", 16: "TIN", 17: "triangle"}
+_UNKNOWN_TYPE = re.compile(r"Unknown WKB type (\d+)")
+
+
+def _wkb_type(value) -> int | None:
+    """The base geometry type (1 point ... 7 collection, 15-17 surfaces) of one WKB value."""
+    if not isinstance(value, (bytes, bytearray, memoryview)) or len(value) < 5:
+        return None
+    order = "<" if value[0] == 1 else ">"
+    (t,) = struct.unpack(order + "I", bytes(value[1:5]))
+    return (t & 0x0FFFFFFF) % 1000
+
+
+def _refuse_unreadable(wkb: np.ndarray, exc: Exception, path, layer: str):
+    """The FormatError for a geometry column shapely cannot read: the feature and why."""
+    import shapely
+
+    k = None
+    for i, value in enumerate(wkb):
+        try:
+            with _quiet():
+                shapely.from_wkb(value, on_invalid="raise")
+        except Exception as one:  # this feature is the one
+            k, exc = i, one
+            break
+    where = f"feature {k + 1}: " if k is not None else ""
+    base = _wkb_type(wkb[k]) if k is not None else None
+    m = _UNKNOWN_TYPE.search(str(exc))
+    nested = int(m.group(1)) % 1000 if m else None
+    kind = _SURFACES.get(base) or _SURFACES.get(nested)  # type: ignore[arg-type]
+    if kind is not None:
+        return FormatError(
+            f"{where}a {kind} (multipatch): surfaces are not supported; only points, lines "
+            "and polygons can be imported",
+            path,
+            _rec(layer),
+        )
+    return FormatError(f"{where}unreadable geometry: {exc}", path, _rec(layer))
+
+
 def _from_wkb(wkb: np.ndarray, path, layer: str) -> np.ndarray:
     import shapely
 
@@ -110,7 +151,7 @@ def _from_wkb(wkb: np.ndarray, path, layer: str) -> np.ndarray:
         with _quiet():
             geoms = shapely.from_wkb(wkb, on_invalid="raise")
     except Exception as exc:  # shapely.errors.GEOSException, TypeError
-        raise FormatError(f"unreadable geometry: {exc}", path, _rec(layer)) from None
+        raise _refuse_unreadable(wkb, exc, path, layer) from None
     # every coordinate of every geometry, before any of it reaches the model or scipy
     # (a 2-D geometry's z comes back as NaN: only a 3-D one's z must be a number)
     xyz, which = shapely.get_coordinates(geoms, include_z=True, return_index=True)
