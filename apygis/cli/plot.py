@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from apygis.cli._common import progress_bar, run_guarded
+from apygis.cli._common import map_input_options, progress_bar, read_map, run_guarded
 
 __all__ = ["FORMATS", "plot"]
 
@@ -102,7 +102,12 @@ def _sources(path: str, layers) -> list[str]:
     callback=_bbox,
     help="Map window X0,Y0,X1,Y1 in the map's CRS units (default: the data, padded).",
 )
-@click.option("--layers", callback=_layers, help="Layers to plot, e.g. c,h,r (default: all).")
+@click.option(
+    "--layers",
+    "plot_layers",
+    callback=_layers,
+    help="Map layers to plot, e.g. c,h,r (default: all).",
+)
 @click.option(
     "--grid",
     type=click.Choice(["crosses", "lines", "off"]),
@@ -139,8 +144,7 @@ def _sources(path: str, layers) -> list[str]:
     help="HP-GL dialect of a .hpgl/.plt output: 1 (HP-GL) or 2 (HP-GL/2, pen widths and colours).",
 )
 @click.option("--library", type=click.Path(), help="Symbol library (default: the user's).")
-@click.option("--src-driver", "--driver", "driver", help="Read the map with this driver.")
-@click.option("--src-crs", help="Assign this CRS to the map (as ogr2ogr -a_srs; a DXF has none).")
+@map_input_options
 @click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
 @run_guarded
 def plot(
@@ -150,7 +154,7 @@ def plot(
     scale,
     paper,
     bbox,
-    layers,
+    plot_layers,
     grid,
     grid_interval,
     control,
@@ -158,9 +162,8 @@ def plot(
     dpi,
     hpgl_version,
     library,
-    driver,
-    src_crs,
     overwrite,
+    src,
 ):
     """Plot the map PATH to OUTPUT, in the format its extension names.
 
@@ -184,7 +187,6 @@ def plot(
     import dataclasses
     from pathlib import Path
 
-    import apygis
     from apygis.errors import DriverError, FileOverwriteError
     from apygis.formats._io import atomic_write_many
     from apygis.model.symbols import load_library
@@ -222,16 +224,9 @@ def plot(
         points = [
             ControlPoint(pid, x, y, z) for pid, (x, y, z) in read_control(control_file).items()
         ]
-    m = apygis.read(path, driver=driver)
-    if src_crs:
-        from apygis.errors import CRSError
-
-        try:
-            m.crs = src_crs
-        except CRSError as exc:
-            raise click.BadParameter(str(exc), param_hint="--src-crs") from None
-    if layers is not None:
-        missing = [e for e in layers if e not in m.layers]
+    m, _ = read_map(path, src)
+    if plot_layers is not None:
+        missing = [e for e in plot_layers if e not in m.layers]
         if missing:
             raise click.BadParameter(
                 f"map {m.id} has no layer {', '.join(missing)} "
@@ -251,7 +246,7 @@ def plot(
             m,
             pdef,
             lib,
-            layers,
+            plot_layers,
             control=control,
             control_points=points,
             grid=grid,

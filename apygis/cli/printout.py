@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from apygis.cli._common import progress_bar, run_guarded
+from apygis.cli._common import map_input_options, progress_bar, read_map, run_guarded
 
 
 @click.command()
@@ -15,13 +15,11 @@ from apygis.cli._common import progress_bar, run_guarded
     type=click.Path(),
     help="Write to this file instead of stdout (.pdf: A4 pages in DejaVu Sans Mono).",
 )
-@click.option(
-    "--src-driver", "--driver", "driver", help="Read with this driver instead of guessing."
-)
+@map_input_options
 @click.option("--library", type=click.Path(), help="Symbol library for the names.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
 @run_guarded
-def printout(path, output, driver, library, overwrite):
+def printout(path, output, library, overwrite, src):
     """Symbol legend, symbols by code, line points with references, and texts.
 
     With -o NAME.pdf the print-out is a PDF of numbered A4 pages in a
@@ -30,13 +28,12 @@ def printout(path, output, driver, library, overwrite):
     """
     from pathlib import Path
 
-    import apygis
     from apygis.errors import FileOverwriteError
     from apygis.formats._io import atomic_write_many
     from apygis.model.symbols import load_library
     from apygis.plot.printout import printout_text
 
-    m = apygis.read(path, driver=driver)
+    m, _ = read_map(path, src)
     text = printout_text(m, load_library(library))
     if output is None:
         click.echo(text, nl=False)

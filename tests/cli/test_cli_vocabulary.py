@@ -279,7 +279,9 @@ def _help(path):
     return _run(*path, "--help").output
 
 
-@pytest.mark.parametrize("path", [("info",), ("validate",), ("convert",)], ids=" ".join)
+@pytest.mark.parametrize(
+    "path", [("info",), ("validate",), ("convert",), ("plot",), ("printout",)], ids=" ".join
+)
 def test_commands_that_read_maps_share_the_input_options(path):
     text = _help(path)
     for opt in ("--src-driver", "--src-crs", "--layer", "--layer-map", "--snap", "--code-field",

@@ -159,9 +159,9 @@ def test_src_crs_and_a_map_without_scale(run, tmp_path):
     res = run("plot", tmp_path / "f.gpkg", "-o", out, "--scale", "2500", "--overwrite")
     assert "1:2500" in res.output
     res = run(
-        "plot", tmp_path / "f.gpkg", "-o", out, "--src-crs", "EPSG:99999999", "--overwrite", code=2
+        "plot", tmp_path / "f.gpkg", "-o", out, "--src-crs", "EPSG:99999999", "--overwrite", code=1
     )
-    assert "--src-crs" in res.output
+    assert "not a coordinate reference system: 'EPSG:99999999'" in res.output
 
 
 def test_plot_errors(run, sample_dir, tmp_path):
