@@ -21,7 +21,9 @@ apygis's convention (centre of the top-left pixel at 0, 0).
 
 ``lsm_points_per_s`` times least-squares matching alone: all of apygis's
 measurements of one image pair repeated at full resolution in this process
-(one core), measurements per second.
+(one core), half a pixel off, with the affine shapes the coarser pyramid level
+hands over as the pipeline does (``lsm_points_per_s_identity_start``: from the
+identity), measurements per second.
 
 Run: ``python benchmarks/bench_at.py [--folder DIR] [--size PX] [--strips N] [--images N]``
 Last line: one JSON object with the keys ``apygis_s``, ``pycolmap_s``,
@@ -145,9 +147,12 @@ def run_pycolmap(folder: Path, work: Path, truth) -> dict:
     }
 
 
-def lsm_rate(blk: Path) -> float:
-    """LSM measurements per second on one core: the largest image pair's points again, from
-    half a pixel off at full resolution (the best of three runs after a warm-up)."""
+def lsm_rate(blk: Path) -> tuple[float, float]:
+    """LSM measurements per second on one core at full resolution: the largest image pair's
+    points again, half a pixel off. Returned: the rate in the pipeline's conditions (the
+    affine shape as the coarser pyramid level hands it over, here from a first pass at
+    level 1) and the rate from an identity affine (more iterations); each the best of three
+    runs after a warm-up."""
     from apygis.aerotri.imagery import full_to_level
     from apygis.aerotri.lsm import track
     from apygis.aerotri.pyramid import PyramidSource
@@ -167,12 +172,18 @@ def lsm_rate(blk: Path) -> float:
     search = PyramidSource(folder / f"{int(c)}.tif")
     rng = np.random.default_rng(0)
     start = sel[:, 2:4] + rng.normal(0, 0.5, (len(sel), 2))  # half a pixel off
-    rates = []
-    for _ in range(4):  # the first run warms caches and imports: the best of the others
-        t = time.perf_counter()
-        res = track(ref, search, sel[:, 0:2], full_to_level(start, 0), start=0, half=10)
-        rates.append(res.ok.sum() / (time.perf_counter() - t))
-    return float(max(rates[1:]))
+    # the affine shapes the coarser level finds (they are the same at every level)
+    coarse = track(ref, search, sel[:, 0:2], full_to_level(start, 1), start=1, half=10)
+    affine = np.where(coarse.ok[:, None, None], coarse.affine, np.eye(2))
+    rates = {}
+    for name, A in (("pipeline", affine), ("identity", None)):
+        r = []
+        for _ in range(4):  # the first run warms caches and imports: the best of the others
+            t = time.perf_counter()
+            res = track(ref, search, sel[:, 0:2], full_to_level(start, 0), A, start=0, half=10)
+            r.append(res.ok.sum() / (time.perf_counter() - t))
+        rates[name] = float(max(r[1:]))
+    return rates["pipeline"], rates["identity"]
 
 
 def main() -> None:
@@ -193,7 +204,7 @@ def main() -> None:
         print(f"apygis:   {a['seconds']:.1f} s {a['score']}", file=sys.stderr)
         c = run_pycolmap(folder, work, truth)
         print(f"pycolmap: {c['seconds']:.1f} s {c['score']}", file=sys.stderr)
-        rate = lsm_rate(a["block"])
+        rate, rate_identity = lsm_rate(a["block"])
     out = {
         "images": len(truth.images),
         "size_px": args.size,
@@ -217,6 +228,7 @@ def main() -> None:
         "pycolmap_rays_per_point": round(c["rays_per_point"], 3),
         "apygis_gross_pct": a["score"]["gross_pct"],
         "lsm_points_per_s": round(rate, 1),
+        "lsm_points_per_s_identity_start": round(rate_identity, 1),
         "apygis_stages_s": a["stages_s"],
     }
     print(json.dumps(out))
