@@ -238,7 +238,7 @@ class SessionFeed:
                 found, gone = self._line_points(ext, lay.line_points, want)
             else:
                 arr = lay.table(table)
-                found = arr[np.isin(arr["num"], np.fromiter(want, np.int64, len(want)))]
+                found = arr[_having(arr["num"], want)]
                 have = set(found["num"].tolist())
                 gone = [n for n in want if n not in have]
             if len(found):
@@ -275,12 +275,12 @@ class SessionFeed:
             if old is not None:
                 ask.update(r for r in old if r >= 0)
         nums = lp["num"]
-        mask = np.isin(nums, np.fromiter(ask, np.int64, len(ask)))
+        mask = _having(nums, ask)
         found_nums = set(nums[mask].tolist())
         now = lp[mask]
         more = {int(r) for f in _REFS for r in now[f].tolist() if r >= 0} - found_nums - ask
         if more:
-            mask |= np.isin(nums, np.fromiter(more, np.int64, len(more)))
+            mask |= _having(nums, more)
             now = lp[mask]
             found_nums = set(nums[mask].tolist())
         gone = [n for n in ask if n not in found_nums]
@@ -293,8 +293,8 @@ class SessionFeed:
         self.batches += 1
         self._box.add(change)
 
-    def _apply(self, change: dict) -> None:  # on the server's loop
-        _apply(self.server.hub, change)
+    def _apply(self, changes: list[dict]) -> None:  # on the server's loop
+        _apply(self.server.hub, changes)
 
     # ------------------------------------------------------------------ server loop
 
@@ -308,6 +308,16 @@ class SessionFeed:
             _status_dict(st.mode, st.layer, st.prompt, mark, counts, self.map_id),
             {"scale": scale, "crosshair": crosshair},
         )
+
+
+def _having(nums: np.ndarray, wanted: set[int]) -> np.ndarray:
+    """The mask of the rows whose number is in ``wanted`` (an entry names a few)."""
+    if len(wanted) > 8:
+        return np.isin(nums, np.fromiter(wanted, np.int64, len(wanted)))
+    mask = np.zeros(len(nums), dtype=bool)
+    for n in wanted:
+        mask |= nums == n
+    return mask
 
 
 def _display(session) -> dict[str, float]:
@@ -330,15 +340,18 @@ def _refs_of(lp: np.ndarray) -> dict[int, tuple]:
     )
 
 
-def _apply(hub: ViewHub, change: dict) -> None:
-    """On the server's loop: arrays to rows, then :meth:`ViewHub.apply`."""
-    for key in ("upsert", "full"):
-        if key in change:
-            change[key] = {
-                ext: {t: rows_of(a) if isinstance(a, np.ndarray) else a for t, a in tables.items()}
-                for ext, tables in change[key].items()
-            }
-    hub.apply(change)
+def _apply(hub: ViewHub, changes: list[dict]) -> None:
+    """On the server's loop: arrays to rows, then :meth:`ViewHub.apply_all`."""
+    for change in changes:
+        for key in ("upsert", "full"):
+            if key in change:
+                change[key] = {
+                    ext: {
+                        t: rows_of(a) if isinstance(a, np.ndarray) else a for t, a in tables.items()
+                    }
+                    for ext, tables in change[key].items()
+                }
+    hub.apply_all(changes)
 
 
 def control_overlays(ids, ground, residuals, rejected: dict | None = None) -> list[dict]:

@@ -51,8 +51,11 @@ log = logging.getLogger(__name__)
 #: Messages a page may have waiting before it is resynchronised with the whole state.
 DEFAULT_QUEUE_LIMIT = 256
 #: Changes and the status line are delivered to the hub at most this often, seconds (the
-#: first after a pause at once).
-DELIVERY_INTERVAL_S = 0.01
+#: first after a pause at once). Each delivery takes the interpreter from the session's
+#: thread for a moment: 40 a second are as smooth as a screen shows and cost the session
+#: little (``bench_session.py``'s ``view_overhead_pct``), and keep an entry's way to the
+#: page well under 50 ms.
+DELIVERY_INTERVAL_S = 0.025
 #: The status line and the floating mark are delivered at most this often, seconds (30 a
 #: second: as smooth as a screen needs).
 STATUS_INTERVAL_S = 1.0 / 30.0
@@ -252,18 +255,32 @@ class ViewHub:
             v.status()
 
     def apply(self, change: dict[str, Any]) -> None:
-        """One change from the producer: update the state, queue one delta for every page.
+        """One change from the producer: :meth:`apply_all` of ``[change]``."""
+        self.apply_all([change])
 
-        ``change`` may hold ``entries`` (rows as in the delta), ``upsert``
+    def apply_all(self, changes: list[dict[str, Any]]) -> None:
+        """Changes from the producer, in order: update the state, queue one delta for every page.
+
+        Each change may hold ``entries`` (rows as in the delta), ``upsert``
         (layer -> table -> rows read from the map), ``remove`` (layer ->
         table -> numbers), ``full`` (layer -> table -> all rows: the layer
         as it is now; compared with the state here, and what differs becomes
-        part of this delta), ``overlays``, ``messages``, ``display`` and
+        part of the delta), ``overlays``, ``messages``, ``display`` and
         ``ended``.
+
+        The changes become one delta: a record they touched is sent as it is
+        after the last of them (upserted), or removed if it was there before
+        them and is not now; one that came and went in between is not sent.
+        A page that applies the delta to the state it had ends with this
+        state, as if it had been sent one delta per change, in fewer messages.
         """
-        upsert: dict[str, dict[str, list]] = {}
-        remove: dict[str, dict[str, list]] = {}
-        new_layers = []
+        before: dict[tuple[str, str], dict[int, bool]] = {}  # touched -> was there before
+        new_layers: list[str] = []
+        entries: list[list] = []
+        msgs: list[str] = []
+        overlays: list[dict] = []
+        display = None
+        ended = False
 
         def tables_of(ext: str) -> dict[str, dict[int, list]]:
             got = self.layers.get(ext)
@@ -272,50 +289,75 @@ class ViewHub:
                 new_layers.append(ext)
             return got
 
-        for ext, tables in change.get("upsert", {}).items():
-            mine = tables_of(ext)
-            for t, rows in tables.items():
-                if rows:
+        def touch(ext: str, t: str, mine: dict[int, list], n: int) -> None:
+            seen = before.setdefault((ext, t), {})
+            if n not in seen:
+                seen[n] = n in mine
+
+        for change in changes:
+            for ext, tables in change.get("upsert", {}).items():
+                mine_tables = tables_of(ext)
+                for t, rows in tables.items():
+                    mine = mine_tables[t]
                     for r in rows:
-                        mine[t][int(r[0])] = r
-                    upsert.setdefault(ext, {}).setdefault(t, []).extend(rows)
-        for ext, tables in change.get("remove", {}).items():
-            mine = tables_of(ext)
-            for t, nums in tables.items():
-                gone = [n for n in nums if mine[t].pop(int(n), None) is not None]
-                if gone:
-                    remove.setdefault(ext, {}).setdefault(t, []).extend(gone)
-        for ext, tables in change.get("full", {}).items():
-            mine = tables_of(ext)
-            for t, rows in tables.items():
-                new = {int(r[0]): r for r in rows}
-                old = mine[t]
-                changed = [r for n, r in new.items() if old.get(n) != r]
-                gone = [n for n in old if n not in new]
-                mine[t] = new
-                if changed:
-                    upsert.setdefault(ext, {}).setdefault(t, []).extend(changed)
-                if gone:
-                    remove.setdefault(ext, {}).setdefault(t, []).extend(gone)
-                if not change.get("entries") and (changed or gone):
-                    self.corrections += len(changed) + len(gone)
-                    log.debug("view of layer %s %s: %d records corrected", ext, t, len(changed))
-        entries = change.get("entries", [])
+                        n = int(r[0])
+                        touch(ext, t, mine, n)
+                        mine[n] = r
+            for ext, tables in change.get("remove", {}).items():
+                mine_tables = tables_of(ext)
+                for t, nums in tables.items():
+                    mine = mine_tables[t]
+                    for n in nums:
+                        n = int(n)
+                        if n in mine:
+                            touch(ext, t, mine, n)
+                            del mine[n]
+            for ext, tables in change.get("full", {}).items():
+                mine_tables = tables_of(ext)
+                for t, rows in tables.items():
+                    new = {int(r[0]): r for r in rows}
+                    old = mine_tables[t]
+                    changed = [n for n, r in new.items() if old.get(n) != r]
+                    gone = [n for n in old if n not in new]
+                    for n in changed:
+                        touch(ext, t, old, n)
+                    for n in gone:
+                        touch(ext, t, old, n)
+                    mine_tables[t] = new
+                    if not change.get("entries") and (changed or gone):
+                        self.corrections += len(changed) + len(gone)
+                        log.debug(
+                            "view of layer %s %s: %d records corrected", ext, t, len(changed)
+                        )
+            entries.extend(change.get("entries", ()))
+            msgs.extend(change.get("messages", ()))
+            overlays.extend(change.get("overlays", ()))
+            if change.get("display") is not None:
+                display = change["display"]
+            if change.get("ended"):
+                ended = True
+
+        upsert: dict[str, dict[str, list]] = {}
+        remove: dict[str, dict[str, list]] = {}
+        for (ext, t), seen in before.items():
+            mine = self.layers[ext][t]
+            rows = [mine[n] for n in seen if n in mine]
+            gone = [n for n, was in seen.items() if was and n not in mine]
+            if rows:
+                upsert.setdefault(ext, {})[t] = rows
+            if gone:
+                remove.setdefault(ext, {})[t] = gone
         self.entries.extend(entries)
-        msgs = change.get("messages", [])
         self.messages.extend(msgs)
-        overlays = change.get("overlays", [])
         if overlays:
             self.overlays.extend(overlays)
             results = [o for o in self.overlays if o.get("kind") in ("area", "dhi")]
             if len(results) > RESULTS_KEPT:
                 drop = {id(o) for o in results[: len(results) - RESULTS_KEPT]}
                 self.overlays = [o for o in self.overlays if id(o) not in drop]
-        display = change.get("display")
         if display is not None:
             self.display = dict(display)
             self._status_cache = None
-        ended = bool(change.get("ended"))
         if ended:
             self.ended = True
         if not (upsert or remove or entries or msgs or overlays or display or ended or new_layers):

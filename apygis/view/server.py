@@ -77,7 +77,8 @@ class Mailbox:
     :meth:`add` (any thread) queues a change, to be applied in order;
     :meth:`put` keeps only the latest status. Neither waits: each only
     schedules a delivery on the loop unless one is due already. A delivery
-    applies every queued change (``apply(change)``), then the latest status
+    applies the changes queued since the last one, all together and in order
+    (``apply(changes)``: one delta for the pages, not one each), then the latest status
     (``status(value)``, at most every :data:`~apygis.view.hub.STATUS_INTERVAL_S`),
     and the next one comes no sooner than ``interval`` seconds later, so that a
     busy producer wakes the loop at most ``1 / interval`` times a second;
@@ -87,7 +88,7 @@ class Mailbox:
     def __init__(
         self,
         server: ViewServer,
-        apply: Callable[[Any], None],
+        apply: Callable[[list[Any]], None],
         status: Callable[[Any], None],
         interval: float,
     ):
@@ -117,8 +118,11 @@ class Mailbox:
 
     def _deliver(self) -> None:  # on the loop
         try:
-            while self._queue:
-                self._server._run_safely(self._apply, (self._queue.popleft(),))
+            if self._queue:
+                changes = []
+                while self._queue:  # the producer may append meanwhile: taken one by one
+                    changes.append(self._queue.popleft())
+                self._server._run_safely(self._apply, (changes,))
             loop = self._server.loop
             now = loop.time() if loop is not None else 0.0
             if self._dirty and now - self._status_at >= STATUS_INTERVAL_S:
@@ -379,7 +383,7 @@ class ViewServer:
         except Exception:
             log.exception("view: a change could not be applied")
 
-    def mailbox(self, apply: Callable[[Any], None], status: Callable[[Any], None]) -> Mailbox:
+    def mailbox(self, apply: Callable[[list[Any]], None], status: Callable[[Any], None]) -> Mailbox:
         """A :class:`Mailbox` onto this server's loop, delivering at most every
         :data:`~apygis.view.hub.DELIVERY_INTERVAL_S`."""
         return Mailbox(self, apply, status, DELIVERY_INTERVAL_S)

@@ -8,6 +8,8 @@ import urllib.error
 import urllib.request
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import apygis
 from apygis.compile.events import Keys, Mark, Press
@@ -342,3 +344,62 @@ def test_a_closed_page_and_a_failing_observer_do_not_stop_the_session(tmp_path):
     finally:
         server.stop()
         sess.close()
+
+
+# the changes of a session, delivered in batches of any size: the page ends where the hub is
+
+_NUMS = st.integers(1, 6)
+_ROW = st.builds(lambda n, x: [n, float(x), 0.0, 0.0, 1], _NUMS, st.integers(0, 3))
+_CHANGE = st.one_of(
+    st.builds(lambda rows: {"upsert": {"r": {"symbols": rows}}}, st.lists(_ROW, max_size=3)),
+    st.builds(lambda nums: {"remove": {"r": {"symbols": nums}}}, st.lists(_NUMS, max_size=3)),
+    st.builds(
+        lambda rows: {"full": {"r": {"symbols": list({r[0]: r for r in rows}.values())}}},
+        st.lists(_ROW, max_size=4),
+    ),
+)
+
+
+def _page_applies(page: dict[int, list], delta: dict) -> None:
+    """What the page's applyDelta does to a table: upserts, then removes."""
+    for r in delta.get("upsert", {}).get("r", {}).get("symbols", []):
+        page[r[0]] = r
+    for n in delta.get("remove", {}).get("r", {}).get("symbols", []):
+        page.pop(n, None)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(_CHANGE, max_size=12), st.lists(st.integers(1, 5), min_size=1, max_size=12))
+def test_changes_in_batches_leave_the_page_equal_to_the_hub(changes, sizes):
+    import json
+
+    one, batched = _hub(limit=1000), _hub(limit=1000)
+    pages: list[dict[int, list]] = [{}, {}]
+    sent: list[list[dict]] = [[], []]
+
+    async def nowhere(text: str) -> None:
+        raise AssertionError("the deltas are read from the queue")
+
+    for hub in (one, batched):
+        v = Viewer(nowhere, 1000)
+        v.resync = False  # a page that has the (empty) state already
+        hub.add(v)
+    for c in changes:
+        one.apply(json.loads(json.dumps(c)))
+    pos, k = 0, 0
+    while pos < len(changes):
+        size = sizes[k % len(sizes)]
+        batched.apply_all([json.loads(json.dumps(c)) for c in changes[pos : pos + size]])
+        pos, k = pos + size, k + 1
+    for k, hub in enumerate((one, batched)):
+        (v,) = hub.viewers
+        for _, text in v.pending:
+            delta = json.loads(text)
+            sent[k].append(delta)
+            _page_applies(pages[k], delta)
+        assert pages[k] == hub.layers["r"]["symbols"]
+    assert one.layers == batched.layers
+    assert len(sent[1]) <= len(sent[0])
+    for delta in sent[1]:  # a record is upserted or removed, never both in one delta
+        up = {r[0] for r in delta.get("upsert", {}).get("r", {}).get("symbols", [])}
+        assert not up & set(delta.get("remove", {}).get("r", {}).get("symbols", []))
