@@ -326,9 +326,7 @@ class ViewHub:
                     mine_tables[t] = new
                     if not change.get("entries") and (changed or gone):
                         self.corrections += len(changed) + len(gone)
-                        log.debug(
-                            "view of layer %s %s: %d records corrected", ext, t, len(changed)
-                        )
+                        log.debug("view of layer %s %s: %d records corrected", ext, t, len(changed))
             entries.extend(change.get("entries", ()))
             msgs.extend(change.get("messages", ()))
             overlays.extend(change.get("overlays", ()))
