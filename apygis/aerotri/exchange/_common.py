@@ -3,11 +3,19 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from apygis.aerotri.exchange import POINT_KINDS, ExchangeBlock, ExImage, ExObservation, ExPoint
+from apygis.aerotri.exchange import (
+    POINT_KINDS,
+    ExchangeBlock,
+    ExImage,
+    ExObservation,
+    ExPoint,
+    WriteReport,
+)
 from apygis.errors import FormatError, ValueRangeError
 
 CONTROL = ("full", "planimetric", "height")
@@ -91,6 +99,36 @@ def photo_mm(ob: ExObservation, image: ExImage) -> tuple[float, float] | None:
         h = m @ np.array([ob.x_px, ob.y_px, 1.0])
         return float(h[0] / h[2]), float(h[1] / h[2])
     return None
+
+
+def photo_rows(
+    idx: Index, report: WriteReport, label: Callable[[ExObservation, int], object], file: str
+) -> tuple[list[tuple[int, list, np.ndarray]], int]:
+    """The photo-coordinate rows of a bundle-program file: per image (ascending number)
+    with observations, ``(image, labels, xy_mm)``, and the number of observations written.
+
+    ``label(ob, image)`` gives each observation's point label in the file's form (it may
+    refuse one); observations without photo coordinates are skipped, and so are their
+    sigmas (``file`` names the file that holds none), each counted in ``report``.
+    """
+    rows = []
+    n_obs = 0
+    for image, obs in idx.by_image().items():
+        labels, xy = [], []
+        for ob in obs:
+            mm = photo_mm(ob, idx.images[image])
+            if mm is None:
+                report.skip("observations without photo coordinates (and no pixel transform)")
+                continue
+            labels.append(label(ob, image))
+            xy.append(mm)
+        report.skip(
+            f"observation sigmas ({file} has none)", sum(ob.sigma_px is not None for ob in obs)
+        )
+        if labels:
+            rows.append((image, labels, np.array(xy)))
+            n_obs += len(labels)
+    return rows, n_obs
 
 
 def pixels(ob: ExObservation, image: ExImage) -> tuple[float, float] | None:

@@ -19,8 +19,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from apygis.aerotri.exchange import ExchangeBlock, ExImage, ExObservation, ExPoint, WriteReport
 from apygis.aerotri.exchange._common import (
     CONTROL,
@@ -29,7 +27,7 @@ from apygis.aerotri.exchange._common import (
     control_xyz_ok,
     finite_xyz,
     need_files,
-    photo_mm,
+    photo_rows,
 )
 from apygis.fileio import atomic_write_many, read_bytes
 from apygis.formats import bluh as layout
@@ -54,25 +52,13 @@ def write_bluh(block: ExchangeBlock, target) -> WriteReport:
     files = {s: base.with_name(base.name + s) for s in SUFFIXES}
     idx = Index(block, base)
     report = WriteReport()
-    rows = []
-    n_obs = 0
     pho = files[".pho"]
-    for image, obs in idx.by_image().items():
-        numbers, xy = [], []
-        for ob in obs:
-            mm = photo_mm(ob, idx.images[image])
-            if mm is None:
-                report.skip("observations without photo coordinates (and no pixel transform)")
-                continue
-            numbers.append(layout.point_number(ob.point, pho, f"photo {image}"))
-            xy.append(mm)
-        report.skip(
-            "observation sigmas (BLUH's photo file has none)",
-            sum(ob.sigma_px is not None for ob in obs),
-        )
-        if numbers:
-            rows.append((image, numbers, np.array(xy)))
-            n_obs += len(numbers)
+    rows, n_obs = photo_rows(
+        idx,
+        report,
+        lambda ob, image: layout.point_number(ob.point, pho, f"photo {image}"),
+        "BLUH's photo file",
+    )
     contents: dict[Path, bytes] = {pho: layout.encode_photo_coordinates(rows, pho)}
     control = []
     ctl = files[".ctl"]

@@ -39,7 +39,7 @@ from apygis.aerotri.exchange._common import (
     control_xyz_ok,
     finite_xyz,
     need_files,
-    photo_mm,
+    photo_rows,
 )
 from apygis.errors import DegenerateGeometryError, FormatError
 from apygis.fileio import atomic_write_many, read_bytes
@@ -66,24 +66,7 @@ def write_patb(block: ExchangeBlock, target) -> WriteReport:
     files = {s: base.with_name(base.name + s) for s in SUFFIXES}
     idx = Index(block, base)
     report = WriteReport()
-    rows = []
-    n_obs = 0
-    for image, obs in idx.by_image().items():
-        names, xy = [], []
-        for ob in obs:
-            mm = photo_mm(ob, idx.images[image])
-            if mm is None:
-                report.skip("observations without photo coordinates (and no pixel transform)")
-                continue
-            names.append(ob.point)
-            xy.append(mm)
-        report.skip(
-            "observation sigmas (PAT-B's image file has none)",
-            sum(ob.sigma_px is not None for ob in obs),
-        )
-        if names:
-            rows.append((image, names, np.array(xy)))
-            n_obs += len(names)
+    rows, n_obs = photo_rows(idx, report, lambda ob, image: ob.point, "PAT-B's image file")
     contents: dict[Path, bytes] = {
         files[".im"]: layout.encode_image_coordinates(rows, files[".im"])
     }

@@ -37,6 +37,7 @@ from apygis.formats.e00.mapping import (
     _arc_arrays,
     _int_col,
     _table,
+    label_numbers,
     rebuild_report,
 )
 from apygis.formats.e00.parse import _Table
@@ -193,15 +194,6 @@ def foreign_to_map(info: dict, tables: list[_Table], mp: MapFile, path, opts: di
         else:
             rows = np.arange(n)
         codes = _codes(pat, rows, opts, opts["point_code"], "label points", path)
-        nums = lab_ids
-        if n and (nums.min() < 0 or len(np.unique(nums)) != n):
-            warn(
-                log,
-                f"{path}: label IDs negative or repeated; symbols numbered 1..{n}",
-                "renumbered",
-                n,
-                "symbols",
-            )
-            nums = np.arange(1, n + 1)
+        nums = label_numbers(lab_ids, path)
         xyz = np.column_stack([lab_xy, np.zeros(n)])
         _add_records(lay.add_symbols, path, xyz, codes, nums)

@@ -337,6 +337,22 @@ def _add_records(add, path, *args) -> None:
         raise FormatError(str(exc), path=path) from None
 
 
+def label_numbers(ids: np.ndarray, path) -> np.ndarray:
+    """The symbol numbers of ``ids`` label points: their IDs, or 1..n (with a warning)
+    where an ID is negative or repeated."""
+    n = len(ids)
+    if n and (ids.min() < 0 or len(np.unique(ids)) != n):
+        warn(
+            log,
+            f"{path}: label IDs negative or repeated; symbols numbered 1..{n}",
+            "renumbered",
+            n,
+            "symbols",
+        )
+        return np.arange(1, n + 1)
+    return ids
+
+
 def _labels_to_map(info, tables, mp: MapFile, default: str, path) -> None:
     lab = info["labels"]
     value = np.concatenate(lab["ids"]) if lab["ids"] else np.zeros(0, np.int64)
@@ -351,16 +367,7 @@ def _labels_to_map(info, tables, mp: MapFile, default: str, path) -> None:
         return
     x, y = xy[:, 0], xy[:, 1]
     if pat is None or not _need_items(pat, _PAT_ITEMS):
-        nums = value
-        if nums.min() < 0 or len(np.unique(nums)) != n:
-            warn(
-                log,
-                f"{path}: label IDs negative or repeated; symbols numbered 1..{n}",
-                "renumbered",
-                n,
-                "symbols",
-            )
-            nums = np.arange(1, n + 1)
+        nums = label_numbers(value, path)
         z = np.zeros(n)
         if pat is not None and pat.has("HEIGHT"):
             z = _float_col(pat, "HEIGHT", path)
