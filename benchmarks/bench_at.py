@@ -21,9 +21,12 @@ apygis's convention (centre of the top-left pixel at 0, 0).
 
 ``lsm_points_per_s`` times least-squares matching alone: all of apygis's
 measurements of one image pair repeated at full resolution in this process
-(one core), half a pixel off, with the affine shapes the coarser pyramid level
-hands over as the pipeline does (``lsm_points_per_s_identity_start``: from the
-identity), measurements per second.
+(one core), from what the coarser pyramid level hands over in the pipeline (a
+pass at level 1 from half a pixel off: its positions and affine shapes);
+``lsm_points_per_s_half_px`` from half a pixel off with level 1's affine shapes,
+``lsm_points_per_s_identity_start`` from half a pixel off and the identity
+affine (more iterations); measurements per second, each with its mean number
+of iterations (``lsm_iterations_*``).
 
 Run: ``python benchmarks/bench_at.py [--folder DIR] [--size PX] [--strips N] [--images N]``
 Last line: one JSON object with the keys ``apygis_s``, ``pycolmap_s``,
@@ -147,12 +150,12 @@ def run_pycolmap(folder: Path, work: Path, truth) -> dict:
     }
 
 
-def lsm_rate(blk: Path) -> tuple[float, float]:
+def lsm_rate(blk: Path) -> dict[str, float]:
     """LSM measurements per second on one core at full resolution: the largest image pair's
-    points again, half a pixel off. Returned: the rate in the pipeline's conditions (the
-    affine shape as the coarser pyramid level hands it over, here from a first pass at
-    level 1) and the rate from an identity affine (more iterations); each the best of three
-    runs after a warm-up."""
+    points again. Three starts: what level 1 hands over in the pipeline (a level-1 pass from
+    half a pixel off, its positions and affine shapes mapped down), half a pixel off with
+    level 1's affine shapes, half a pixel off with the identity affine. Each the best of
+    three runs after a warm-up; with the mean number of iterations."""
     from apygis.aerotri.imagery import full_to_level
     from apygis.aerotri.lsm import track
     from apygis.aerotri.pyramid import PyramidSource
@@ -172,18 +175,24 @@ def lsm_rate(blk: Path) -> tuple[float, float]:
     search = PyramidSource(folder / f"{int(c)}.tif")
     rng = np.random.default_rng(0)
     start = sel[:, 2:4] + rng.normal(0, 0.5, (len(sel), 2))  # half a pixel off
-    # the affine shapes the coarser level finds (they are the same at every level)
-    coarse = track(ref, search, sel[:, 0:2], full_to_level(start, 1), start=1, half=10)
-    affine = np.where(coarse.ok[:, None, None], coarse.affine, np.eye(2))
-    rates = {}
-    for name, A in (("pipeline", affine), ("identity", None)):
+    level1 = track(ref, search, sel[:, 0:2], full_to_level(start, 1), start=1, stop=1, half=10)
+    keep = level1.ok  # the points level 1 hands over
+    affine = level1.affine[keep]
+    starts = {
+        "pipeline": (level1.xy[keep], affine),
+        "half_px": (start[keep], affine),
+        "identity": (start[keep], None),
+    }
+    out = {}
+    for name, (xy0, A) in starts.items():
         r = []
         for _ in range(4):  # the first run warms caches and imports: the best of the others
             t = time.perf_counter()
-            res = track(ref, search, sel[:, 0:2], full_to_level(start, 0), A, start=0, half=10)
+            res = track(ref, search, sel[keep, 0:2], xy0, A, start=0, half=10)
             r.append(res.ok.sum() / (time.perf_counter() - t))
-        rates[name] = float(max(r[1:]))
-    return rates["pipeline"], rates["identity"]
+        out[name] = float(max(r[1:]))
+        out[f"iterations_{name}"] = float(res.iterations.mean())
+    return out
 
 
 def main() -> None:
@@ -204,7 +213,8 @@ def main() -> None:
         print(f"apygis:   {a['seconds']:.1f} s {a['score']}", file=sys.stderr)
         c = run_pycolmap(folder, work, truth)
         print(f"pycolmap: {c['seconds']:.1f} s {c['score']}", file=sys.stderr)
-        rate, rate_identity = lsm_rate(a["block"])
+        rates = lsm_rate(a["block"])
+        print(f"LSM at full resolution, one core: {rates}", file=sys.stderr)
     out = {
         "images": len(truth.images),
         "size_px": args.size,
@@ -227,8 +237,12 @@ def main() -> None:
         "apygis_share_3_or_more": round(a["share_3_or_more"], 3),
         "pycolmap_rays_per_point": round(c["rays_per_point"], 3),
         "apygis_gross_pct": a["score"]["gross_pct"],
-        "lsm_points_per_s": round(rate, 1),
-        "lsm_points_per_s_identity_start": round(rate_identity, 1),
+        "lsm_points_per_s": round(rates["pipeline"], 1),
+        "lsm_points_per_s_half_px": round(rates["half_px"], 1),
+        "lsm_points_per_s_identity_start": round(rates["identity"], 1),
+        "lsm_iterations_pipeline": round(rates["iterations_pipeline"], 2),
+        "lsm_iterations_half_px": round(rates["iterations_half_px"], 2),
+        "lsm_iterations_identity_start": round(rates["iterations_identity"], 2),
         "apygis_stages_s": a["stages_s"],
     }
     print(json.dumps(out))

@@ -19,12 +19,16 @@ Gauss-Newton on the linearised observation equations::
     dx = (dt_c, dt_r, dA00, dA01, dA10, dA11, dr0, dr1)
 
 with ``(gc, gr)`` the gradient of the search image at ``s``. All points are
-solved at once (batched 8 x 8 normal equations); a point stops updating when the
-largest move of its window's corners in one step is below ``tol_px``, or below
-``10 tol_px`` with every geometric step below 5 % of that parameter's own
-standard deviation (where noise rivals the texture, Gauss-Newton's ``N``
-overestimates the cost's curvature and the iteration creeps; steps that small
-no longer matter).
+solved at once (batched 8 x 8 normal equations); a point stops updating when in
+one step its position moved less than ``tol_px`` and its window's corners less
+than ``tol_shape_px`` (default ``10 tol_px``: the shape parameters settle to a
+tenth of that across the window, an order of magnitude below their own
+precision; waiting for the corners to settle to ``tol_px`` costs a further
+iteration and changes the positions by 0.0002 px RMS), or when the corners moved
+less than ``tol_shape_px`` with every geometric step below 5 % of that
+parameter's own standard deviation (where noise rivals the texture,
+Gauss-Newton's ``N`` overestimates the cost's curvature and the iteration
+creeps; steps that small no longer matter).
 
 Images are sampled through their cubic B-spline interpolant
 (:class:`SplineImage`), values and analytic derivatives from the same spline,
@@ -361,6 +365,7 @@ def lsm(
     half: int = 7,
     max_iter: int = 15,
     tol_px: float = 0.002,
+    tol_shape_px: float | None = None,
     corr_min: float = 0.75,
     sigma_max: float = 0.5,
     affine_max: float = 0.25,
@@ -376,7 +381,8 @@ def lsm(
     radius: all points from 2 px off, 99 % from 3, 79 % from 4, 15 % from 6
     (``half = 7``, texture of 1.8 px scale; never a wrong ok in these trials). The model and
     the covariance are in the module docstring; ``tol_px`` bounds the last
-    step's move of the window corners; ``sigma_max`` (px) the accepted
+    step's move of the position, ``tol_shape_px`` (``10 tol_px`` when None) that of
+    the window corners; ``sigma_max`` (px) the accepted
     ``sigma``; ``affine_max`` the accepted departure of ``A`` from ``affine0``,
     ``||(A - A0) A0^-1||_2`` (with six affine parameters a 15 x 15 window of
     fine texture can fit a wrong place at correlation 0.8 - 0.9, but only with
@@ -396,6 +402,7 @@ def lsm(
         half=half,
         max_iter=max_iter,
         tol_px=tol_px,
+        tol_shape_px=10 * tol_px if tol_shape_px is None else tol_shape_px,
         corr_min=corr_min,
         sigma_max=sigma_max,
         affine_max=affine_max,
@@ -425,6 +432,7 @@ def _lsm(
     half: int,
     max_iter: int,
     tol_px: float,
+    tol_shape_px: float,
     corr_min: float,
     sigma_max: float,
     affine_max: float,
@@ -462,46 +470,22 @@ def _lsm(
     reason[~ref_in] = LsmReason.OUTSIDE
     active = np.flatnonzero(ref_in)
     converged = np.zeros(n, dtype=bool)
+    P_buf = np.empty((min(n, _CHUNK), 19, m))
+    P_buf[:, 18] = 1.0
 
     for _ in range(max_iter):
         if active.size == 0:
             break
-        ta, Aa = t[active], A[active]
-        sc = ta[:, 0:1] + Aa[:, 0, 0:1] * u[:, 0] + Aa[:, 0, 1:2] * u[:, 1]
-        sr = ta[:, 1:2] + Aa[:, 1, 0:1] * u[:, 0] + Aa[:, 1, 1:2] * u[:, 1]
-        g32, gc, gr = search.sample_grad_cr(sc, sr)
-        g = g32.astype(np.float64)
-        ra0, ra1 = r0[active], r1[active]
-        tpa = tpl[active]
-        la = tpa - ra0[:, None] - ra1[:, None] * g
-        if noise_model:
-            qc, dqc = _q_dq(sc)
-            qr, dqr = _q_dq(sr)
-        else:
-            qc = qr = np.ones((1, m), np.float32)
-            dqc = dqr = np.zeros((1, m), np.float32)
-        # all window sums as one matrix product: P (n, 19, m) @ moments (m, 6)
-        P = np.empty((active.size, 19, m))
-        ga = np.multiply(ra1[:, None], gc, out=P[:, 3])
-        gb = np.multiply(ra1[:, None], gr, out=P[:, 4])
-        np.multiply(ga, ga, out=P[:, 0])
-        np.multiply(ga, gb, out=P[:, 1])
-        np.multiply(gb, gb, out=P[:, 2])
-        np.multiply(ga, g, out=P[:, 5])
-        np.multiply(gb, g, out=P[:, 6])
-        np.multiply(g, g, out=P[:, 7])
-        P[:, 8] = g
-        np.multiply(ga, la, out=P[:, 9])
-        np.multiply(gb, la, out=P[:, 10])
-        P[:, 11] = la
-        np.multiply(g, la, out=P[:, 12])
-        np.multiply(la, la, out=P[:, 13])
-        np.multiply(dqc, qr, out=P[:, 14])
-        np.multiply(qc, dqr, out=P[:, 15])
-        np.multiply(qc, qr, out=P[:, 16])
-        np.multiply(g, tpa, out=P[:, 17])
-        P[:, 18] = 1.0
-        R = (P.reshape(-1, m) @ moments).reshape(active.size, 19, 6)
+        ra1 = r1[active]
+        # the window sums, point chunk by point chunk (P stays in the cache)
+        R = np.empty((active.size, 19, 6))
+        for c0 in range(0, active.size, _CHUNK):
+            ch = active[c0 : c0 + _CHUNK]
+            k = ch.size
+            _window_sums(
+                search, t[ch], A[ch], r0[ch], r1[ch], tpl[ch], u, moments, noise_model,
+                P_buf[:k], R[c0 : c0 + k],
+            )  # fmt: skip
         N = R[:, _N_PROD, _N_MOM]
         b = R[:, _B_PROD, _B_MOM]
         dg = np.sqrt(np.einsum("nkk->nk", N))
@@ -548,12 +532,14 @@ def _lsm(
         bad[np.hypot(*(t[active] - t0[active]).T) > half] = LsmReason.SHIFT
         bad[~(good & fin)] = LsmReason.SINGULAR
         reason[active[bad > 0]] = bad[bad > 0]
-        # converged: the window corners moved < tol_px, or < 10 tol_px with every geometric
-        # step below 5 % of its own standard deviation (weak texture converges slowly in
-        # Gauss-Newton, whose N overestimates the curvature; such steps change nothing)
+        # converged: the window corners moved < tol_shape_px and the position < tol_px, or
+        # every geometric step is below 5 % of its own standard deviation (weak texture
+        # converges slowly in Gauss-Newton, whose N overestimates the curvature; such steps
+        # change nothing)
         sd = np.sqrt(np.abs(np.einsum("nkk->nk", Ni)[:, :6]) * (sig2 * (1.0 + ra1 * ra1))[:, None])
-        tiny = np.all(np.abs(dx[:, :6]) <= 0.05 * sd, axis=1) & (move < 10 * tol_px)
-        done = (bad == 0) & ((move < tol_px) | tiny)
+        settled = move < tol_shape_px
+        tiny = np.all(np.abs(dx[:, :6]) <= 0.05 * sd, axis=1)
+        done = (bad == 0) & settled & ((np.abs(dt).max(axis=1) < tol_px) | tiny)
         idx = active[done]
         converged[idx] = True
         s0sq[idx] = vtv[done] / (m - 8)
@@ -595,6 +581,48 @@ def _lsm(
     reason[vague] = LsmReason.IMPRECISE
     res.ok = ok & ~vague
     return res
+
+
+_CHUNK = 24
+"""Points per chunk of the window sums: P (19 x m doubles a point) stays in the cache."""
+
+
+def _window_sums(search, t, A, r0, r1, tpl, u, moments, noise_model, P, out) -> None:
+    """The window sums of one chunk of points into ``out`` (k, 19, 6): the products
+    (rows of ``P``, k x 19 x m, row 18 preset to 1) of the Jacobian's factors, the
+    residuals ``l``, the noise factors ``q`` and the template, times the moments
+    ``(1, uc, ur, uc^2, uc ur, ur^2)`` of the offsets ``u``."""
+    m = len(u)
+    sc = t[:, 0:1] + A[:, 0, 0:1] * u[:, 0] + A[:, 0, 1:2] * u[:, 1]
+    sr = t[:, 1:2] + A[:, 1, 0:1] * u[:, 0] + A[:, 1, 1:2] * u[:, 1]
+    g32, gc, gr = search.sample_grad_cr(sc, sr)
+    g = g32.astype(np.float64)
+    la = tpl - r0[:, None] - r1[:, None] * g
+    if noise_model:
+        qc, dqc = _q_dq(sc)
+        qr, dqr = _q_dq(sr)
+    else:
+        qc = qr = np.ones((1, m), np.float32)
+        dqc = dqr = np.zeros((1, m), np.float32)
+    ga = np.multiply(r1[:, None], gc, out=P[:, 3])
+    gb = np.multiply(r1[:, None], gr, out=P[:, 4])
+    np.multiply(ga, ga, out=P[:, 0])
+    np.multiply(ga, gb, out=P[:, 1])
+    np.multiply(gb, gb, out=P[:, 2])
+    np.multiply(ga, g, out=P[:, 5])
+    np.multiply(gb, g, out=P[:, 6])
+    np.multiply(g, g, out=P[:, 7])
+    P[:, 8] = g
+    np.multiply(ga, la, out=P[:, 9])
+    np.multiply(gb, la, out=P[:, 10])
+    P[:, 11] = la
+    np.multiply(g, la, out=P[:, 12])
+    np.multiply(la, la, out=P[:, 13])
+    np.multiply(dqc, qr, out=P[:, 14])
+    np.multiply(qc, dqr, out=P[:, 15])
+    np.multiply(qc, qr, out=P[:, 16])
+    np.multiply(g, tpl, out=P[:, 17])
+    out[...] = (P.reshape(-1, m) @ moments).reshape(out.shape)
 
 
 def _covariance(t, A, r1, q_ref, s0sq, N, u) -> np.ndarray:
@@ -652,6 +680,7 @@ def track(
     affine0=None,
     *,
     start: int,
+    stop: int = 0,
     half: int = 7,
     corr_min: float = 0.75,
     tile: int = 4096,
@@ -660,7 +689,8 @@ def track(
     sigma_max: float = 0.5,
     affine_max: float = 0.25,
 ) -> LsmResult:
-    """LSM coarse to fine from pyramid level ``start`` down to full resolution.
+    """LSM coarse to fine from pyramid level ``start`` down to level ``stop`` (full
+    resolution by default).
 
     ``ref_xy0`` (n, 2): reference points, level-0 pixels (fixed: at level ``k``
     the template is centred at ``full_to_level(ref_xy0, k)``);
@@ -675,11 +705,16 @@ def track(
     not ok with that level's reason (its ``xy`` mapped to level 0). The other
     keywords are :func:`lsm`'s, at every level (``sigma_max`` in that level's
     pixels; ``affine_max`` against the previous level's ``A``; ``tol_px`` at
-    full resolution, :data:`COARSE_TOL_PX` above it). The noise model stays at
+    full resolution, :data:`COARSE_TOL_PX` above it, for the position and the
+    window corners alike: the affine a coarse level hands over settles to 0.005).
+    The noise model stays at
     every level: without its correction of pixel locking the iteration can swing
     between neighbouring half pixels and not converge. Returns the
-    :class:`LsmResult` at level 0 (``iterations`` summed over levels).
+    :class:`LsmResult` with positions in level-0 pixels (``iterations`` summed over
+    levels; ``cov`` and ``sigma`` in level-``stop`` pixels).
     """
+    if not 0 <= stop <= start:
+        raise ValueError(f"levels run from start down to stop: got start {start}, stop {stop}")
     ref_xy0 = np.asarray(ref_xy0, dtype=float).reshape(-1, 2)
     n = len(ref_xy0)
     xy = np.asarray(search_xy_approx, dtype=float).reshape(n, 2).copy()
@@ -698,7 +733,7 @@ def track(
     out = LsmResult.empty(n)
     alive = np.ones(n, dtype=bool)
     total_iter = np.zeros(n, dtype=int)
-    for level in range(start, -1, -1):
+    for level in range(start, stop - 1, -1):
         if level < start:
             xy = full_to_level(level_to_full(xy, level + 1), level)
         rxy = full_to_level(ref_xy0, level)
@@ -716,7 +751,8 @@ def track(
             order = np.argsort(inv, kind="stable")
             splits = np.flatnonzero(np.diff(inv[order])) + 1
             for grp in np.split(idx_all[order], splits):
-                lv_opts = opts if level == 0 else {**opts, "tol_px": max(tol_px, COARSE_TOL_PX)}
+                coarse = max(tol_px, COARSE_TOL_PX)
+                lv_opts = opts if level == 0 else {**opts, "tol_px": coarse, "tol_shape_px": coarse}
                 r = _track_group(ref, search, level, rxy[grp], xy[grp], A[grp], half, lv_opts)
                 res.put(grp, r)
         total_iter += res.iterations
@@ -726,8 +762,9 @@ def track(
         alive &= res.ok
         xy = np.where(alive[:, None], res.xy, xy)
         A = np.where(alive[:, None, None], res.affine, A)
-        if level == 0:
+        if level == stop:
             out.put(alive, _subset(res, alive))
+            out.xy[alive] = level_to_full(res.xy[alive], level)
     out.iterations = total_iter
     return out
 

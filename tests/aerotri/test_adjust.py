@@ -285,17 +285,31 @@ def test_models_for_compilation(tiny_copy, tiny_block_dir, tmp_path):
     np.testing.assert_allclose(ExteriorOrientation(*ext[a]).parameters, left.parameters)
     geo = OrientedGeometry(o)
     assert geo.loop is not None
-    # a tie point of the model: the loop's photo coordinates are its measurements
+    # a tie point of the model: the loop's photo coordinates are its measurements plus the
+    # adjustment's residuals there (projection minus measurement, px; a pixel is 0.23 mm)
     with Block.open(tiny_copy) as b:
         row = b.conn.execute(
-            "SELECT ap.X, ap.Y, ap.Z, o1.x_mm, o1.y_mm, o2.x_mm, o2.y_mm FROM adjusted_points ap "
+            "SELECT ap.point, ap.X, ap.Y, ap.Z FROM adjusted_points ap "
             "JOIN observations o1 ON o1.point = ap.point AND o1.image = ? "
             "JOIN observations o2 ON o2.point = ap.point AND o2.image = ? LIMIT 1", (a, b_),
         ).fetchone()  # fmt: skip
-    u = geo.loop.update(row[0], row[1], row[2])
-    assert math.hypot(u.x_left - row[3], u.y_left - row[4]) < 0.01  # mm: a pixel is 0.27
-    assert math.hypot(u.x_right - row[5], u.y_right - row[6]) < 0.01
-    assert all(isinstance(v, int) for v in geo.plates(row[0], row[1], row[2]))
+        seen = {}
+        for image in (a, b_):
+            x, y, vx, vy = b.conn.execute(
+                "SELECT o.x_mm, o.y_mm, r.vx_px, r.vy_px FROM observations o JOIN residuals r "
+                "ON r.point = o.point AND r.image = o.image WHERE o.point = ? AND o.image = ?",
+                (row[0], image),
+            ).fetchone()
+            (tr,) = b.conn.execute(
+                "SELECT transform FROM interior WHERE image = ?", (image,)
+            ).fetchone()
+            linear = np.reshape(json.loads(tr), (3, 3))[:2, :2]  # pixel -> mm
+            seen[image] = (x, y, linear @ [vx, vy])
+    u = geo.loop.update(row[1], row[2], row[3])
+    for (x, y), image in (((u.x_left, u.y_left), a), ((u.x_right, u.y_right), b_)):
+        mx, my, residual_mm = seen[image]
+        np.testing.assert_allclose([x - mx, y - my], residual_mm, atol=0.001)
+    assert all(isinstance(v, int) for v in geo.plates(row[1], row[2], row[3]))
 
 
 def test_point_sketches(tiny_copy, tiny_block_dir, tmp_path):
