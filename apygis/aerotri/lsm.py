@@ -100,7 +100,7 @@ class LsmReason(enum.IntEnum):
 
     OK = 0
     NOT_CONVERGED = 1  #: ``max_iter`` iterations without convergence
-    SHIFT = 2  #: the position moved more than ``half`` from its start
+    SHIFT = 2  #: the position moved more than ``max_shift`` (default ``half``) from its start
     SINGULAR = 3  #: singular normal equations (no texture) or non-finite values
     AFFINE = 4  #: a singular value of ``A`` left ``[0.5, 2]``, or ``A`` left ``affine_max``
     GAIN = 5  #: gain ``r1`` not positive (contrast reversal)
@@ -321,18 +321,19 @@ def _q(x: np.ndarray) -> np.ndarray:
 
 
 @cache
-def _lookup_tables() -> np.ndarray:
-    return np.stack([t[:-1] for t in _noise_tables()]).astype(np.float32)
+def _lookup_tables() -> tuple[np.ndarray, ...]:
+    return tuple(np.ascontiguousarray(t[:-1], dtype=np.float32) for t in _noise_tables())
 
 
-def _q_dq(x: np.ndarray, with_d: bool = False) -> np.ndarray:
+def _q_dq(x: np.ndarray, with_d: bool = False) -> tuple[np.ndarray, ...]:
     """``q``, ``q'`` (and ``D`` when ``with_d``) at ``x`` (nearest of 512 fractions per
-    pixel: fast and ample), stacked on a new first axis."""
+    pixel: fast and ample), each shaped like ``x``."""
     t = _lookup_tables()
-    k = t.shape[1]  # a power of 2
+    k = len(t[0])  # a power of 2
     # truncation is floor for x >= -0.5 / k; below, one table step off: negligible
     i = (x * k + 0.5).astype(np.intp) & (k - 1)
-    return t[: 3 if with_d else 2, i]
+    # one take per table: indexing the stacked tables as t[:2, i] is 8 times slower
+    return tuple(tab.take(i) for tab in t[: 3 if with_d else 2])
 
 
 # Jacobian columns (dt_c, dt_r, dA00, dA01, dA10, dA11, dr0, dr1) = phi * lever with
@@ -370,6 +371,7 @@ def lsm(
     sigma_max: float = 0.5,
     affine_max: float = 0.25,
     noise_model: bool = True,
+    max_shift: float | None = None,
 ) -> LsmResult:
     """Least-squares matching of templates of ``ref`` at ``ref_xy`` into ``search``.
 
@@ -390,7 +392,8 @@ def lsm(
     right matches at low SNR). ``noise_model=False`` leaves out the corrections of
     interpolated noise (module docstring: no pixel-locking correction, covariance
     ``s0^2 N^-1``): cheaper, but the iteration may then swing between neighbouring
-    half pixels. Returns an :class:`LsmResult`; ``xy`` is the search point homologous
+    half pixels. ``max_shift`` (px, ``half`` when None) bounds the move from
+    ``search_xy0``. Returns an :class:`LsmResult`; ``xy`` is the search point homologous
     to ``ref_xy`` itself.
     """
     ref_xy = np.asarray(ref_xy, dtype=float).reshape(-1, 2)
@@ -407,6 +410,7 @@ def lsm(
         sigma_max=sigma_max,
         affine_max=affine_max,
         noise_model=noise_model,
+        max_shift=float(half) if max_shift is None else float(max_shift),
     )
     if n <= _BATCH:
         return _lsm(ref, ref_xy, search, search_xy0, affine0, **kw)
@@ -437,6 +441,7 @@ def _lsm(
     sigma_max: float,
     affine_max: float,
     noise_model: bool = True,
+    max_shift: float,
 ) -> LsmResult:
     """:func:`lsm` for one batch of points."""
     n = len(ref_xy)
@@ -470,8 +475,7 @@ def _lsm(
     reason[~ref_in] = LsmReason.OUTSIDE
     active = np.flatnonzero(ref_in)
     converged = np.zeros(n, dtype=bool)
-    P_buf = np.empty((min(n, _CHUNK), 19, m))
-    P_buf[:, 18] = 1.0
+    P_buf = np.empty((min(n, _CHUNK), 18, m))
 
     for _ in range(max_iter):
         if active.size == 0:
@@ -529,7 +533,7 @@ def _lsm(
         fin = np.all(np.isfinite(dx), axis=1)
         bad[(sv[:, 0] > 2.0) | (sv[:, 1] < 0.5)] = LsmReason.AFFINE
         bad[r1[active] <= 0] = LsmReason.GAIN
-        bad[np.hypot(*(t[active] - t0[active]).T) > half] = LsmReason.SHIFT
+        bad[np.hypot(*(t[active] - t0[active]).T) > max_shift] = LsmReason.SHIFT
         bad[~(good & fin)] = LsmReason.SINGULAR
         reason[active[bad > 0]] = bad[bad > 0]
         # converged: the window corners moved < tol_shape_px and the position < tol_px, or
@@ -589,15 +593,19 @@ _CHUNK = 24
 
 def _window_sums(search, t, A, r0, r1, tpl, u, moments, noise_model, P, out) -> None:
     """The window sums of one chunk of points into ``out`` (k, 19, 6): the products
-    (rows of ``P``, k x 19 x m, row 18 preset to 1) of the Jacobian's factors, the
-    residuals ``l``, the noise factors ``q`` and the template, times the moments
-    ``(1, uc, ur, uc^2, uc ur, ur^2)`` of the offsets ``u``."""
+    (rows of ``P``, a k x 18 x m buffer) of the Jacobian's factors, the residuals
+    ``l``, the noise factors ``q`` and the template, times the moments
+    ``(1, uc, ur, uc^2, uc ur, ur^2)`` of the offsets ``u``; row 18 (the constant 1)
+    is the moments' own sum."""
     m = len(u)
     sc = t[:, 0:1] + A[:, 0, 0:1] * u[:, 0] + A[:, 0, 1:2] * u[:, 1]
     sr = t[:, 1:2] + A[:, 1, 0:1] * u[:, 0] + A[:, 1, 1:2] * u[:, 1]
     g32, gc, gr = search.sample_grad_cr(sc, sr)
-    g = g32.astype(np.float64)
-    la = tpl - r0[:, None] - r1[:, None] * g
+    g = P[:, 8]
+    g[...] = g32
+    la = np.multiply(r1[:, None], g, out=P[:, 11])  # l = tpl - r0 - r1 g
+    np.subtract(tpl, la, out=la)
+    la -= r0[:, None]
     if noise_model:
         qc, dqc = _q_dq(sc)
         qr, dqr = _q_dq(sr)
@@ -612,17 +620,16 @@ def _window_sums(search, t, A, r0, r1, tpl, u, moments, noise_model, P, out) -> 
     np.multiply(ga, g, out=P[:, 5])
     np.multiply(gb, g, out=P[:, 6])
     np.multiply(g, g, out=P[:, 7])
-    P[:, 8] = g
     np.multiply(ga, la, out=P[:, 9])
     np.multiply(gb, la, out=P[:, 10])
-    P[:, 11] = la
     np.multiply(g, la, out=P[:, 12])
     np.multiply(la, la, out=P[:, 13])
     np.multiply(dqc, qr, out=P[:, 14])
     np.multiply(qc, dqr, out=P[:, 15])
     np.multiply(qc, qr, out=P[:, 16])
     np.multiply(g, tpl, out=P[:, 17])
-    out[...] = (P.reshape(-1, m) @ moments).reshape(out.shape)
+    out[:, :18] = (P.reshape(-1, m) @ moments).reshape(len(P), 18, 6)
+    out[:, 18] = moments.sum(axis=0)
 
 
 def _covariance(t, A, r1, q_ref, s0sq, N, u) -> np.ndarray:
@@ -688,6 +695,7 @@ def track(
     tol_px: float = 0.002,
     sigma_max: float = 0.5,
     affine_max: float = 0.25,
+    max_shift: float | None = None,
 ) -> LsmResult:
     """LSM coarse to fine from pyramid level ``start`` down to level ``stop`` (full
     resolution by default).
@@ -706,15 +714,18 @@ def track(
     keywords are :func:`lsm`'s, at every level (``sigma_max`` in that level's
     pixels; ``affine_max`` against the previous level's ``A``; ``tol_px`` at
     full resolution, :data:`COARSE_TOL_PX` above it, for the position and the
-    window corners alike: the affine a coarse level hands over settles to 0.005).
-    The noise model stays at
-    every level: without its correction of pixel locking the iteration can swing
+    window corners alike: the affine a coarse level hands over settles to 0.005;
+    ``max_shift`` bounds the move at the start level, ``half`` when None, and is
+    :data:`FINE_SHIFT_PX` below it).
+    The noise model stays at every level: without its correction of pixel
+    locking the iteration can swing
     between neighbouring half pixels and not converge. Returns the
     :class:`LsmResult` with positions in level-0 pixels (``iterations`` summed over
     levels; ``cov`` and ``sigma`` in level-``stop`` pixels).
     """
     if not 0 <= stop <= start:
         raise ValueError(f"levels run from start down to stop: got start {start}, stop {stop}")
+    start_shift = float(half) if max_shift is None else float(max_shift)
     ref_xy0 = np.asarray(ref_xy0, dtype=float).reshape(-1, 2)
     n = len(ref_xy0)
     xy = np.asarray(search_xy_approx, dtype=float).reshape(n, 2).copy()
@@ -752,7 +763,11 @@ def track(
             splits = np.flatnonzero(np.diff(inv[order])) + 1
             for grp in np.split(idx_all[order], splits):
                 coarse = max(tol_px, COARSE_TOL_PX)
-                lv_opts = opts if level == 0 else {**opts, "tol_px": coarse, "tol_shape_px": coarse}
+                lv_opts = {
+                    **opts,
+                    "max_shift": start_shift if level == start else FINE_SHIFT_PX,
+                    **({} if level == 0 else {"tol_px": coarse, "tol_shape_px": coarse}),
+                }
                 r = _track_group(ref, search, level, rxy[grp], xy[grp], A[grp], half, lv_opts)
                 res.put(grp, r)
         total_iter += res.iterations
@@ -777,6 +792,11 @@ def _subset(r: LsmResult, sel) -> LsmResult:
 #: Pixels between a patch's samples and its neighbours in the atlas (spline prefilter reach).
 ATLAS_MARGIN = 8
 
+#: Largest move (pixels of the level) below the start level: a finer level refines what the
+#: coarser one found (within a pixel or so); a point that moves further has jumped to another
+#: feature. It also bounds the search atlas's patches (less prefiltering).
+FINE_SHIFT_PX = 3.0
+
 #: Convergence tolerance (pixels of the level) above full resolution: a coarse level only
 #: seeds the next, whose convergence radius (2 px) is far larger than twice this.
 COARSE_TOL_PX = 0.05
@@ -790,7 +810,7 @@ def _atlas(window: np.ndarray, c0: int, r0: int, xy: np.ndarray, m: int):
     computed at once, so the prefilter's cost grows with the number of points,
     not with the area the points are spread over. The prefilter runs across
     neighbouring patches, but its influence decays by 0.268 per pixel and every
-    sample lies at least ``m - (half + reach)`` >= :data:`ATLAS_MARGIN` pixels
+    sample lies at least ``m - (reach + max_shift)`` >= :data:`ATLAS_MARGIN` pixels
     inside its own patch (relative error 0.268^8 < 3e-5: below 0.01 DN of an
     8-bit image). Returns the :class:`SplineImage` and, per point,
     the integer offset (n x 2) from window-level pixel coordinates to atlas
@@ -846,7 +866,7 @@ def _track_group(ref, search, level, rxy, sxy, A, half, opts) -> LsmResult:
     win_r = ref.read(level, c0, r0, c1 - c0 + 1, r1 - r0 + 1)
     spline_r, off_r = _atlas(win_r, c0, r0, rxy, mref)
     reach = float(np.abs(A).sum(axis=2).max()) * half
-    ms = int(np.ceil(reach + half + ATLAS_MARGIN))
+    ms = int(np.ceil(reach + opts["max_shift"] + ATLAS_MARGIN))
     c0 = int(np.floor(sxy[:, 0].min())) - ms
     r0 = int(np.floor(sxy[:, 1].min())) - ms
     c1 = int(np.ceil(sxy[:, 0].max())) + ms
