@@ -19,16 +19,15 @@ Gauss-Newton on the linearised observation equations::
     dx = (dt_c, dt_r, dA00, dA01, dA10, dA11, dr0, dr1)
 
 with ``(gc, gr)`` the gradient of the search image at ``s``. All points are
-solved at once (batched 8 x 8 normal equations); a point stops updating when in
-one step its position moved less than ``tol_px`` and its window's corners less
-than ``tol_shape_px`` (default ``10 tol_px``: the shape parameters settle to a
-tenth of that across the window, an order of magnitude below their own
-precision; waiting for the corners to settle to ``tol_px`` costs a further
-iteration and changes the positions by 0.0002 px RMS), or when the corners moved
-less than ``tol_shape_px`` with every geometric step below 5 % of that
-parameter's own standard deviation (where noise rivals the texture,
-Gauss-Newton's ``N`` overestimates the cost's curvature and the iteration
-creeps; steps that small no longer matter).
+solved at once (batched 8 x 8 normal equations); a point stops updating when the
+largest move of its window's corners in one step is below ``tol_px``, or below
+``10 tol_px`` with every geometric step below 5 % of that parameter's own
+standard deviation (where noise rivals the texture, Gauss-Newton's ``N``
+overestimates the cost's curvature and the iteration creeps; steps that small
+no longer matter). The corners, not the position alone, must settle: a point
+whose shape keeps creeping is weakly determined, and letting it stop once its
+position settles accepted 17 % more measurements on a noisy digital block, with
+a median error 14 % larger.
 
 Images are sampled through their cubic B-spline interpolant
 (:class:`SplineImage`), values and analytic derivatives from the same spline,
@@ -366,7 +365,6 @@ def lsm(
     half: int = 7,
     max_iter: int = 15,
     tol_px: float = 0.002,
-    tol_shape_px: float | None = None,
     corr_min: float = 0.75,
     sigma_max: float = 0.5,
     affine_max: float = 0.25,
@@ -383,8 +381,7 @@ def lsm(
     radius: all points from 2 px off, 99 % from 3, 79 % from 4, 15 % from 6
     (``half = 7``, texture of 1.8 px scale; never a wrong ok in these trials). The model and
     the covariance are in the module docstring; ``tol_px`` bounds the last
-    step's move of the position, ``tol_shape_px`` (``10 tol_px`` when None) that of
-    the window corners; ``sigma_max`` (px) the accepted
+    step's move of the window corners; ``sigma_max`` (px) the accepted
     ``sigma``; ``affine_max`` the accepted departure of ``A`` from ``affine0``,
     ``||(A - A0) A0^-1||_2`` (with six affine parameters a 15 x 15 window of
     fine texture can fit a wrong place at correlation 0.8 - 0.9, but only with
@@ -405,7 +402,6 @@ def lsm(
         half=half,
         max_iter=max_iter,
         tol_px=tol_px,
-        tol_shape_px=10 * tol_px if tol_shape_px is None else tol_shape_px,
         corr_min=corr_min,
         sigma_max=sigma_max,
         affine_max=affine_max,
@@ -436,7 +432,6 @@ def _lsm(
     half: int,
     max_iter: int,
     tol_px: float,
-    tol_shape_px: float,
     corr_min: float,
     sigma_max: float,
     affine_max: float,
@@ -536,14 +531,12 @@ def _lsm(
         bad[np.hypot(*(t[active] - t0[active]).T) > max_shift] = LsmReason.SHIFT
         bad[~(good & fin)] = LsmReason.SINGULAR
         reason[active[bad > 0]] = bad[bad > 0]
-        # converged: the window corners moved < tol_shape_px and the position < tol_px, or
-        # every geometric step is below 5 % of its own standard deviation (weak texture
-        # converges slowly in Gauss-Newton, whose N overestimates the curvature; such steps
-        # change nothing)
+        # converged: the window corners moved < tol_px, or < 10 tol_px with every geometric
+        # step below 5 % of its own standard deviation (weak texture converges slowly in
+        # Gauss-Newton, whose N overestimates the curvature; such steps change nothing)
         sd = np.sqrt(np.abs(np.einsum("nkk->nk", Ni)[:, :6]) * (sig2 * (1.0 + ra1 * ra1))[:, None])
-        settled = move < tol_shape_px
-        tiny = np.all(np.abs(dx[:, :6]) <= 0.05 * sd, axis=1)
-        done = (bad == 0) & settled & ((np.abs(dt).max(axis=1) < tol_px) | tiny)
+        tiny = np.all(np.abs(dx[:, :6]) <= 0.05 * sd, axis=1) & (move < 10 * tol_px)
+        done = (bad == 0) & ((move < tol_px) | tiny)
         idx = active[done]
         converged[idx] = True
         s0sq[idx] = vtv[done] / (m - 8)
@@ -713,15 +706,13 @@ def track(
     not ok with that level's reason (its ``xy`` mapped to level 0). The other
     keywords are :func:`lsm`'s, at every level (``sigma_max`` in that level's
     pixels; ``affine_max`` against the previous level's ``A``; ``tol_px`` at
-    full resolution, :data:`COARSE_TOL_PX` above it, for the position and the
-    window corners alike: the affine a coarse level hands over settles to 0.005;
-    ``max_shift`` bounds the move at the start level, ``half`` when None, and is
-    :data:`FINE_SHIFT_PX` below it).
-    The noise model stays at every level: without its correction of pixel
-    locking the iteration can swing
-    between neighbouring half pixels and not converge. Returns the
-    :class:`LsmResult` with positions in level-0 pixels (``iterations`` summed over
-    levels; ``cov`` and ``sigma`` in level-``stop`` pixels).
+    full resolution, :data:`COARSE_TOL_PX` above it; ``max_shift`` bounds the
+    move at the start level, ``half`` when None, and is :data:`FINE_SHIFT_PX`
+    below it). The noise model stays at every level: without its correction of
+    pixel locking the iteration can swing between neighbouring half pixels and
+    not converge. Returns the :class:`LsmResult` with positions in level-0 pixels
+    (``iterations`` summed over levels; ``cov`` and ``sigma`` in level-``stop``
+    pixels).
     """
     if not 0 <= stop <= start:
         raise ValueError(f"levels run from start down to stop: got start {start}, stop {stop}")
@@ -766,7 +757,7 @@ def track(
                 lv_opts = {
                     **opts,
                     "max_shift": start_shift if level == start else FINE_SHIFT_PX,
-                    **({} if level == 0 else {"tol_px": coarse, "tol_shape_px": coarse}),
+                    **({} if level == 0 else {"tol_px": coarse}),
                 }
                 r = _track_group(ref, search, level, rxy[grp], xy[grp], A[grp], half, lv_opts)
                 res.put(grp, r)
