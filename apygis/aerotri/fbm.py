@@ -51,10 +51,12 @@ Robust model, cross-strip pair (``kind="cross"`` or no photo transforms)
     relief departs from one plane), then a least-squares homography on the
     inliers with ``3 sigma`` rejection (three rounds), then the affine check:
     over a's image the homography's projective denominator must stay within
-    ``[0.8, 1.25]``, it must keep the sense of rotation (no mirror) and scale
-    by ``0.25 .. 4``. ``sigma_px`` is the RMS per coordinate of the transfer
-    residuals ``H p_a - p_b`` of the inliers divided by ``sqrt 2`` (both
-    points are measured).
+    ``[0.8, 1.25]``, it must keep the sense of rotation of the photos (in
+    pixels: no mirror, unless one of the two scans is mirrored against the
+    other, as their photo transforms tell) and scale by ``0.25 .. 4``.
+    ``sigma_px`` is the RMS per coordinate of the transfer residuals
+    ``H p_a - p_b`` of the inliers divided by ``sqrt 2`` (both points are
+    measured).
 
 Unknown or poor prediction
     With ``predict=None`` or fewer than ``min_inliers`` inliers, the prediction
@@ -221,8 +223,19 @@ def homography_from_orientations(
     return H / H[2, 2]
 
 
-def _sift_prediction(img_a: np.ndarray, img_b: np.ndarray) -> np.ndarray | None:
-    """A homography a-px -> b-px from SIFT features (ratio test 0.8, RANSAC), or None."""
+def _sift_prediction(
+    img_a: np.ndarray, img_b: np.ndarray, mirrored: bool = False
+) -> np.ndarray | None:
+    """A homography a-px -> b-px from SIFT features (ratio test 0.8, RANSAC), or None.
+
+    SIFT's descriptors do not survive a mirror: when the scans are mirrored against each
+    other (``mirrored``), b is matched flipped left to right and the flip composed back.
+    """
+    if mirrored:
+        w = np.shape(img_b)[1]
+        flip = np.array([[-1.0, 0.0, w - 1.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+        H = _sift_prediction(img_a, np.asarray(img_b)[:, ::-1])
+        return None if H is None else flip @ H
 
     def u8(img):
         a = np.asarray(img, dtype=np.float32)
@@ -395,17 +408,32 @@ def _strip_model(xy_a, xy_b, photo_a, photo_b, focal_mm, threshold_px):
     return inl, E / np.linalg.norm(E), sigma
 
 
-def _plausible(H, shape_a) -> bool:
-    """The affine check of a cross-strip homography (module docstring)."""
+def _plausible(H, shape_a, mirrored: bool = False) -> bool:
+    """The affine check of a cross-strip homography (module docstring); ``mirrored``: the
+    scans are mirrored against each other (the pixel homography turns the other way)."""
     h, w = shape_a
     corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]], dtype=float)
     den = corners @ H[2, :2] + H[2, 2]
     A = H[:2, :2] / H[2, 2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2] ** 2
-    det = float(np.linalg.det(A))
+    det = float(np.linalg.det(A)) * (-1.0 if mirrored else 1.0)
     return bool(np.all((den > 0.8) & (den < 1.25)) and 0.25**2 < det < 4.0**2)
 
 
-def _homography_model(xy_a, xy_b, threshold_px, shape_a):
+def _mirrored(photo_a: PhotoMap | None, photo_b: PhotoMap | None) -> bool:
+    """Whether the pixel -> photo maps of a and b turn opposite ways (one scan mirrored
+    against the other); False when either is unknown."""
+    if photo_a is None or photo_b is None:
+        return False
+    probe = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    signs = []
+    for photo in (photo_a, photo_b):
+        q = np.asarray(photo(probe), dtype=float)
+        u, v = q[1] - q[0], q[2] - q[0]
+        signs.append(np.sign(u[0] * v[1] - u[1] * v[0]))
+    return bool(signs[0] * signs[1] < 0)
+
+
+def _homography_model(xy_a, xy_b, threshold_px, shape_a, mirrored: bool = False):
     """Inlier mask, homography and sigma (px per coordinate) of a cross-strip pair."""
     H, mask = cv2.findHomography(
         xy_a.astype(np.float32), xy_b.astype(np.float32), cv2.RANSAC, 2.0 * threshold_px,
@@ -426,7 +454,7 @@ def _homography_model(xy_a, xy_b, threshold_px, shape_a):
         if np.array_equal(new, inl):
             break
         inl = new
-    if inl.sum() < 8 or not _plausible(H, shape_a):
+    if inl.sum() < 8 or not _plausible(H, shape_a, mirrored):
         return None
     res = np.linalg.norm(_apply_h(H, xy_a) - xy_b, axis=1)
     return inl, np.asarray(H, dtype=float), math.sqrt(float(np.mean(res[inl] ** 2)) / 2.0)
@@ -453,7 +481,9 @@ def _match_once(
             return _empty("relative orientation failed (RANSAC)", n_cand, predicted_by)
         inl, essential, sigma = out
     else:
-        out2 = _homography_model(xa[ia], xb[ib], threshold_px, np.shape(img_a))
+        out2 = _homography_model(
+            xa[ia], xb[ib], threshold_px, np.shape(img_a), _mirrored(photo_a, photo_b)
+        )
         if out2 is None:
             return _empty("no plausible homography (RANSAC)", n_cand, predicted_by)
         inl, _, sigma = out2
@@ -529,7 +559,7 @@ def match_pair(
         result = _match_once(a, b, pts_a, pts_b, H, *args, "given")
         if result.n_inliers >= min_inliers:
             return result
-    Hs = _sift_prediction(a, b)
+    Hs = _sift_prediction(a, b, _mirrored(photo_a, photo_b))
     if Hs is None:
         return (
             result

@@ -574,7 +574,7 @@ def match_block(
             # tracking joins everything matched so far (other subblocks through their
             # common strips): the images already prepared by earlier runs take part
             pyr, transforms, feats = _prepared(block, images, level)
-            notes = _stage_azimuths(block, bplan, images, transforms, feats, level)
+            notes = _stage_azimuths(block, bplan, transforms, feats, level)
             images = {im.image: im for im in block.images() if im.image in feats}
             bplan = block_plan(block, terrain_z=terrain_z)
             report = _stage_tracking(
@@ -741,19 +741,22 @@ def _stage_pairs(
 AZIMUTH_NOTE_DEG = 20.0
 
 
-def _stage_azimuths(block: Block, bplan, images, transforms, feats, level: int) -> list[str]:
+def _stage_azimuths(block: Block, bplan, transforms, feats, level: int) -> list[str]:
     """The azimuth of each image's photo x axis, from the matches of its strip neighbours.
 
     Between consecutive images ``a``, ``b`` of a strip (``b`` later along the
-    flight) the ground moves backwards through the frame: the shift ``s`` of the
-    frame centre under the pair's similarity (RANSAC over the block-formation
-    matches), in photo coordinates (the images' interior orientations), points
-    against the flight. The flight direction makes the angle
-    ``theta = atan2(-s_y, -s_x)`` with the photo x axis (counter-clockwise), so
-    the x axis has the azimuth ``heading + theta`` (degrees clockwise from north;
-    0 when the photo x axis points along the flight, as film cameras fly). Each
-    image takes the circular mean over its strip pairs; images without a matched
-    strip neighbour keep the flight direction. Stored as ``x_azimuth_deg``.
+    flight) the ground moves backwards through the frame. The pair's similarity
+    ``p_b = R p_a + t`` is fitted (RANSAC over the block-formation matches) in
+    photo coordinates, each image's matches mapped through its own interior
+    orientation (so that scans turned or mirrored differently agree): the ground
+    under a's principal point appears in b at ``t``, so ``s = t`` points against
+    the flight in b's frame, and ``s = R^-1 t`` in a's. The flight direction
+    makes the angle ``theta = atan2(-s_y, -s_x)`` with the photo x axis
+    (counter-clockwise), so the x axis has the azimuth ``heading + theta``
+    (degrees clockwise from north; 0 when the photo x axis points along the
+    flight, as film cameras fly). Each image takes the circular mean over its
+    strip pairs; images without a matched strip neighbour keep the flight
+    direction. Stored as ``x_azimuth_deg``.
     """
     import cv2
 
@@ -768,17 +771,23 @@ def _stage_azimuths(block: Block, bplan, images, transforms, feats, level: int) 
             pa, pb = feats[key[0]][ia], feats[key[1]][ib]
             if key[0] != a:
                 pa, pb = pb, pa
-            M, _ = cv2.estimateAffinePartial2D(pa, pb, method=cv2.RANSAC)
+            # photo millimetres: a mirrored or turned scan is undone by its interior orientation
+            ma = transforms[a].to_mm(level_to_full(pa, level)).astype(np.float32)
+            mb = transforms[b].to_mm(level_to_full(pb, level)).astype(np.float32)
+            M, _ = cv2.estimateAffinePartial2D(
+                ma,
+                mb,
+                method=cv2.RANSAC,
+                ransacReprojThreshold=3 * 2**level * transforms[a].pixel_mm,
+            )
             if M is None:
                 continue
-            for img, src in ((b, True), (a, False)):
-                h, w = images[img].height / 2**level, images[img].width / 2**level
-                c = np.array([(w - 1) / 2, (h - 1) / 2])
-                shift_px = (M[:, :2] @ c + M[:, 2]) - c  # a -> b, pixels of the level
-                lin = transforms[img].matrix[:2, :2]
-                s_mm = lin @ shift_px
+            R, t = M[:, :2], M[:, 2]
+            if abs(np.linalg.det(R)) < 1e-12:
+                continue
+            for img, s_mm in ((b, t), (a, np.linalg.solve(R, t))):
                 theta = math.degrees(math.atan2(-s_mm[1], -s_mm[0]))
-                estimates.setdefault(img, []).append(bplan.headings[b if src else a] + theta)
+                estimates.setdefault(img, []).append(bplan.headings[img] + theta)
     values: dict[int, dict] = {}
     turned = []
     for img, est in estimates.items():
