@@ -20,9 +20,10 @@ origin at the corner of the top-left pixel and are shifted by half a pixel to
 apygis's convention (centre of the top-left pixel at 0, 0).
 
 ``lsm_points_per_s`` times least-squares matching alone: all of apygis's
-measurements of one image pair repeated at full resolution in this process
-(one core), from what the coarser pyramid level hands over in the pipeline (a
-pass at level 1 from half a pixel off: its positions and affine shapes);
+measurements of one image pair repeated at full resolution on one core (a
+child process with one BLAS thread), from what the coarser pyramid level hands
+over in the pipeline (a pass at level 1 from half a pixel off: its positions
+and affine shapes);
 ``lsm_points_per_s_half_px`` from half a pixel off with level 1's affine shapes,
 ``lsm_points_per_s_identity_start`` from half a pixel off and the identity
 affine (more iterations); measurements per second, each with its mean number
@@ -40,6 +41,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -196,6 +199,18 @@ def lsm_rate(blk: Path) -> dict[str, float]:
     return out
 
 
+def lsm_rate_alone(blk: Path) -> dict[str, float]:
+    """:func:`lsm_rate` in a child process with one BLAS thread: one core, as the goal is
+    stated, and none of pycolmap's threads or memory left over in this process."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+           "MKL_NUM_THREADS": "1"}  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, __file__, "--lsm-rate", str(blk)],
+        env=env, check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument(
@@ -204,7 +219,11 @@ def main() -> None:
     ap.add_argument("--size", type=int, default=3000)
     ap.add_argument("--strips", type=int, default=3)
     ap.add_argument("--images", type=int, default=6)
+    ap.add_argument("--lsm-rate", type=Path, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.lsm_rate is not None:  # the child process of lsm_rate_alone
+        print(json.dumps(lsm_rate(args.lsm_rate)))
+        return
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         folder = args.folder or work / "block"
@@ -214,7 +233,7 @@ def main() -> None:
         print(f"apygis:   {a['seconds']:.1f} s {a['score']}", file=sys.stderr)
         c = run_pycolmap(folder, work, truth)
         print(f"pycolmap: {c['seconds']:.1f} s {c['score']}", file=sys.stderr)
-        rates = lsm_rate(a["block"])
+        rates = lsm_rate_alone(a["block"])
         print(f"LSM at full resolution, one core: {rates}", file=sys.stderr)
     out = {
         "images": len(truth.images),
