@@ -231,8 +231,6 @@ def main() -> None:
         truth = load_truth(folder / "truth.json")
         a = run_apygis(folder, work, truth)
         print(f"apygis:   {a['seconds']:.1f} s {a['score']}", file=sys.stderr)
-        # (on the block just matched, this child measured 800-850 per second, against
-        # 2200-2600 on an earlier block and 1840-2520 in this process: not yet explained)
         rates = lsm_rate_alone(a["block"])
         print(f"LSM at full resolution, one core: {rates}", file=sys.stderr)
         c = run_pycolmap(folder, work, truth)
