@@ -164,6 +164,21 @@ def base_path(target, suffixes: tuple[str, ...]) -> Path:
     return p.with_suffix("") if p.suffix.lower() in suffixes else p
 
 
+def read_set(source, suffixes: tuple[str, ...]) -> dict[str, Path]:
+    """The files of a set to read: a file that is not one of the other members
+    (``suffixes[1:]``) is the first member whatever its suffix, the others beside it;
+    else the set named by ``source``. Refused when none of them exists."""
+    src = Path(source)
+    if src.is_file() and src.suffix.lower() not in suffixes[1:]:
+        base = src.with_suffix("")
+        files = {suffixes[0]: src, **{s: base.with_name(base.name + s) for s in suffixes[1:]}}
+    else:
+        base = base_path(src, suffixes)
+        files = {s: base.with_name(base.name + s) for s in suffixes}
+    need_files(files, source)
+    return files
+
+
 def need_files(files: dict[str, Path], source) -> None:
     """Refuse a read where none of the set's files exists."""
     if not any(f.is_file() for f in files.values()):

@@ -26,8 +26,8 @@ from apygis.aerotri.exchange._common import (
     base_path,
     control_xyz_ok,
     finite_xyz,
-    need_files,
     photo_rows,
+    read_set,
 )
 from apygis.fileio import atomic_write_many, read_bytes
 from apygis.formats import bluh as layout
@@ -99,14 +99,7 @@ def read_bluh(source) -> ExchangeBlock:
     Point and image names are the numbers as text; observations get photo coordinates
     only; control points their kind from the control code.
     """
-    src = Path(source)
-    if src.is_file() and src.suffix.lower() != ".ctl":
-        base = src.with_suffix("")
-        files = {".pho": src, ".ctl": base.with_name(base.name + ".ctl")}
-    else:
-        base = base_path(src, SUFFIXES)
-        files = {s: base.with_name(base.name + s) for s in SUFFIXES}
-    need_files(files, source)
+    files = read_set(source, SUFFIXES)
     block = ExchangeBlock()
     images: dict[int, ExImage] = {}
     points: dict[str, ExPoint] = {}

@@ -38,8 +38,8 @@ from apygis.aerotri.exchange._common import (
     base_path,
     control_xyz_ok,
     finite_xyz,
-    need_files,
     photo_rows,
+    read_set,
 )
 from apygis.errors import DegenerateGeometryError, FormatError
 from apygis.fileio import atomic_write_many, read_bytes
@@ -118,18 +118,7 @@ def read_patb(source) -> ExchangeBlock:
     Observations get photo coordinates only (pixels None), images their numbers as names
     (no camera, no pixel transform), control points the kind "full".
     """
-    src = Path(source)
-    if src.is_file() and src.suffix.lower() not in (".con", ".ori"):
-        base = src.with_suffix("")
-        files = {
-            ".im": src,
-            ".con": base.with_name(base.name + ".con"),
-            ".ori": base.with_name(base.name + ".ori"),
-        }
-    else:
-        base = base_path(src, SUFFIXES)
-        files = {s: base.with_name(base.name + s) for s in SUFFIXES}
-    need_files(files, source)
+    files = read_set(source, SUFFIXES)
     block = ExchangeBlock()
     images: dict[int, ExImage] = {}
     points: dict[str, ExPoint] = {}
