@@ -17,9 +17,9 @@ photos with plate motors), a CalComp tablet at 40 counts/mm.
   driver). Percentiles over ``--reports`` reports.
 
 * ``view_overhead_pct``: the session of ``session_events_per_s`` with and
-  without the graphic display (``--view``: the view server on its thread,
-  the session observer, one page connected as a WebSocket client in another
-  process), run alternately ``--view-rounds`` times each; the best time of
+  without the graphic display (``--view``: the view's process following the
+  session's journal, the feed thread sending the mark and status line, one
+  page connected as a WebSocket client in another process), run alternately ``--view-rounds`` times each; the best time of
   each, in per cent of the run without. ``view_noise_pct``: how much the
   runs without the view differ among themselves (the best of the odd runs
   against the best of the even ones): an overhead below it is not measurable
@@ -160,19 +160,19 @@ class Page:
 
 def session_run(sample, geometry, evs, view: bool) -> tuple[float, int]:
     """Seconds for ``evs`` through a Session (journal, motors), with or without the view."""
-    from apygis.view import SessionFeed, ViewServer, session_hub
+    from apygis.view import SessionFeed, ViewProcess, session_hub
 
     tmp = Path(tempfile.mkdtemp())
-    server = page = None
+    server = page = feed = None
     try:
         apygis.write(sample, tmp / "ZH1091")
         ctl = MotorController(SimPort(SimulatedGrbl()), name="sim")
         ctl.connect(reset=True)
         sess = Session(tmp / "ZH1091", geometry, layer="t", motors=ctl)
         if view:
-            server = ViewServer(session_hub(sess))
+            server = ViewProcess(session_hub(sess))
             server.start()
-            sess.subscribe(SessionFeed(server, sess))
+            feed = SessionFeed(server, sess)
             page = Page(server.url)
         t0 = time.perf_counter()
         for ev in evs:
@@ -182,6 +182,8 @@ def session_run(sample, geometry, evs, view: bool) -> tuple[float, int]:
         sess.close()
         return dt, entries
     finally:
+        if feed is not None:
+            feed.close()
         if page is not None:
             page.proc.kill()
             page.proc.wait()
@@ -199,7 +201,7 @@ def paced_run(sample, geometry, n_entries: int, view: bool) -> tuple[np.ndarray,
     report that moved the motors, and (with ``view``) the milliseconds from
     handing the session an ENTER until the page had the entry (else empty).
     """
-    from apygis.view import SessionFeed, ViewServer, session_hub
+    from apygis.view import SessionFeed, ViewProcess, session_hub
 
     tmp = Path(tempfile.mkdtemp())
     try:
@@ -210,10 +212,9 @@ def paced_run(sample, geometry, n_entries: int, view: bool) -> tuple[np.ndarray,
         sess = Session(tmp / "ZH1091", geometry, layer="t", motors=ctl)
         server = feed = page = None
         if view:
-            server = ViewServer(session_hub(sess))
+            server = ViewProcess(session_hub(sess))
             server.start()
             feed = SessionFeed(server, sess)
-            sess.subscribe(feed)
             page = Page(server.url)
         for b in ("DESCR", "2", "ENTER", "ENTER", "1", "2", "ENTER"):
             sess.handle(Press(b))

@@ -33,9 +33,9 @@ ALLOWED: dict[str, set[str]] = {
     "plot": FLOOR | {"model", "formats"},
     "aerotri": FLOOR | {"orient", "formats"},  # aerotriangulation; formats: bundle record layouts
     "session": FLOOR | {"model", "orient", "compile", "instrument", "formats"},
-    # the graphic display: draws the model with the plot's pens, shows the engine's effects; the
-    # session does not import it (the view subscribes through Session.subscribe)
-    "view": FLOOR | {"model", "compile", "plot"},
+    # the graphic display: draws the model with the plot's pens, shows the engine's effects
+    # replayed from a session's journal in a process of its own; the session does not import it
+    "view": FLOOR | {"model", "compile", "plot", "session"},
     "cli": FLOOR
     | {"model", "orient", "compile", "instrument", "formats", "plot", "session", "aerotri", "view"},
     "__init__": FLOOR,  # the public names are imported lazily, by name (PEP 562)

@@ -211,7 +211,8 @@ def session(
         from apygis.cli.view import plotter_and_library, view_server
 
         pdef, _ = plotter_and_library(plotter, None)
-        server = view_server(view_host, view_port)  # the address is taken before any file
+        # the address is taken before any file
+        server = view_server(view_host, view_port, process=True)
     elif plotter or view_wait:
         raise click.UsageError("--plotter and --view-wait go with --view")
 
@@ -296,7 +297,7 @@ def session(
 
 
 def _start_view(sess, server, pdef, lib, no_browser: bool, wait: float):
-    """Serve the session's page and subscribe it to the session; returns the feed."""
+    """Serve the session's page (its process follows the session's journal); returns the feed."""
     from apygis.cli.view import start_view
     from apygis.view import SessionFeed, session_hub
 
@@ -304,7 +305,6 @@ def _start_view(sess, server, pdef, lib, no_browser: bool, wait: float):
         hub = session_hub(sess, plotdef=pdef, library=lib)
         start_view(server, hub, f"session on {sess.map.id}", no_browser)
         feed = SessionFeed(server, sess)
-        sess.subscribe(feed)
     except BaseException:
         server.stop()
         sess.close()

@@ -20,9 +20,13 @@ from apygis.cli._common import run_guarded
 __all__ = ["serve_until_interrupted", "start_view", "view", "view_server"]
 
 
-def view_server(host: str, port: int):
-    """A bound :class:`~apygis.view.ViewServer` (no hub yet); warns when not this machine only."""
-    from apygis.view import ViewServer, is_loopback
+def view_server(host: str, port: int, process: bool = False):
+    """A bound view server (no hub yet); warns when not this machine only.
+
+    A :class:`~apygis.view.ViewServer` on a thread of this process, or with
+    ``process`` (a session's view) a :class:`~apygis.view.ViewProcess`.
+    """
+    from apygis.view import ViewProcess, ViewServer, is_loopback
 
     if not is_loopback(host):
         click.echo(
@@ -30,7 +34,7 @@ def view_server(host: str, port: int):
             "reach it and has the URL (with its token) can watch the map",
             err=True,
         )
-    server = ViewServer(None, host=host, port=port)
+    server = (ViewProcess if process else ViewServer)(None, host=host, port=port)
     server.bind()
     return server
 

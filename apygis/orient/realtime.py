@@ -512,6 +512,11 @@ class RealtimeLoop:
             "positions for one mark position (floats, metres)."
         )
 
+    def __reduce__(self):
+        # the fast path is a closure (not picklable): a copy is built again from the same
+        # orientations and calibrations (the view's process replays a session with one)
+        return (RealtimeLoop, (self.left, self.right, self.left_motors, self.right_motors))
+
     def _refuse(self, X, Y, Z):
         """Raise :class:`MarkPositionError` saying why ``(X, Y, Z)`` was refused."""
         where = f"mark position ({X!r}, {Y!r}, {Z!r})"

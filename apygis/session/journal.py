@@ -49,6 +49,7 @@ __all__ = [
     "SETTINGS",
     "Journal",
     "JournalContents",
+    "JournalTail",
     "JournalWriteError",
     "StaleJournalError",
     "check_files",
@@ -257,33 +258,13 @@ def _event(obj, buttons: frozenset[str]):
     raise ValueError(f"unknown journal record {key!r:.40}")
 
 
-def read_journal(path) -> JournalContents:
-    """Parse and check a journal; a torn last line is dropped with a warning.
-
-    Raises :class:`~apygis.errors.FormatError` naming the file and the line for
-    anything else: bad JSON, JSON nested too deeply, numbers beyond range, a
-    head or an event of the wrong shape or type.
-    """
+def _head(raw: bytes, path) -> tuple:
+    """The head line: ``(map, layer, settings, version, [file states])``; FormatError if bad."""
     from apygis.formats import ascii as apa
     from apygis.model.map import check_ext
 
-    path = Path(path)
     try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise FormatError(f"cannot read the journal: {exc.strerror}", path=path) from None
-    lines = data.split(b"\n")
-    truncated = False
-    if lines and lines[-1] == b"":
-        lines.pop()
-    elif lines:
-        truncated = True  # no newline after the last line: the crash cut it
-        log.warning("%s: the last journal line is incomplete and is ignored", path)
-        lines.pop()
-    if not lines:
-        raise FormatError("the journal has no head line", path=path, record="line 1")
-    try:
-        head = _loads(lines[0])
+        head = _loads(raw)
         if not isinstance(head, dict):
             raise ValueError("the head must be a JSON object")
         version = head.get("journal")
@@ -307,6 +288,32 @@ def read_journal(path) -> JournalContents:
     except (ValueError, OverflowError, RecursionError, UnicodeEncodeError) as exc:
         reason = exc.reason if isinstance(exc, FormatError) else str(exc)
         raise FormatError(f"bad journal head: {reason}", path=path, record="line 1") from None
+    return m, layer, settings, version, states
+
+
+def read_journal(path) -> JournalContents:
+    """Parse and check a journal; a torn last line is dropped with a warning.
+
+    Raises :class:`~apygis.errors.FormatError` naming the file and the line for
+    anything else: bad JSON, JSON nested too deeply, numbers beyond range, a
+    head or an event of the wrong shape or type.
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise FormatError(f"cannot read the journal: {exc.strerror}", path=path) from None
+    lines = data.split(b"\n")
+    truncated = False
+    if lines and lines[-1] == b"":
+        lines.pop()
+    elif lines:
+        truncated = True  # no newline after the last line: the crash cut it
+        log.warning("%s: the last journal line is incomplete and is ignored", path)
+        lines.pop()
+    if not lines:
+        raise FormatError("the journal has no head line", path=path, record="line 1")
+    m, layer, settings, version, states = _head(lines[0], path)
     buttons = _button_names()
     events = []
     for k, raw in enumerate(lines[1:], start=2):
@@ -334,6 +341,75 @@ def read_journal(path) -> JournalContents:
         file_states=states,
         path=path,
     )
+
+
+_NUMBER = rb"(-?(?:0|[1-9][0-9]*)(?:\.[0-9]+)?(?:[eE][-+]?[0-9]+)?)"
+#: A mark line as :class:`Journal` writes it (JSON numbers only; anything else, such as
+#: NaN, takes the general parser and its checks).
+_MARK_LINE = re.compile(rb'\{"mark": \[' + _NUMBER + rb", " + _NUMBER + rb"\]\}")
+
+
+class JournalTail:
+    """A journal read while its session writes it: the head, then the events as they come.
+
+    ``fh`` is the journal opened for reading (binary; from its start); it
+    may have been unlinked since (a terminated session removes its journal:
+    what was written can still be read). :attr:`map`, :attr:`layer` and
+    :attr:`settings` come from the head; :meth:`read` returns the events of
+    the lines completed since the last call (a line still being written
+    waits for its newline). Save records (``files``) are skipped. A bad line
+    is a :class:`~apygis.errors.FormatError` naming the file and the line.
+    """
+
+    def __init__(self, fh, path):
+        self.path = Path(path)
+        self._fh = fh
+        self._rest = b""
+        self.line = 0
+        self.position = 0  # bytes consumed (up to the end of the last complete line)
+        raw = b""
+        while not raw.endswith(b"\n"):  # the head is written whole, at once
+            more = fh.readline()
+            if not more:
+                raise FormatError("the journal has no head line", path=self.path, record="line 1")
+            raw += more
+        self.position = len(raw)
+        self.line = 1
+        self.map, layer, self.settings, self.version, _ = _head(raw[:-1], self.path)
+        self.layer = layer.lower()
+        self._buttons = _button_names()
+
+    def read(self, upto: int | None = None) -> list:
+        """The events of the lines completed since the last call (up to byte ``upto``)."""
+        want = -1 if upto is None else max(0, upto - self.position - len(self._rest))
+        data = self._fh.read(want) if want else b""
+        if not data:
+            return []
+        lines = (self._rest + data).split(b"\n")
+        self._rest = lines.pop()
+        out = []
+        fast = _MARK_LINE.fullmatch
+        for raw in lines:
+            self.line += 1
+            self.position += len(raw) + 1
+            got = fast(raw)  # most lines are marks: read without the general parser
+            if got is not None:
+                x, y = float(got[1]), float(got[2])
+                if -MAX_MARK_MM <= x <= MAX_MARK_MM and -MAX_MARK_MM <= y <= MAX_MARK_MM:
+                    out.append(Mark(x, y))
+                    continue
+            try:
+                ev = _event(_loads(raw), self._buttons)
+            except ValueError as exc:
+                raise FormatError(
+                    f"bad journal event: {exc}", path=self.path, record=f"line {self.line}"
+                ) from None
+            if not isinstance(ev, tuple):
+                out.append(ev)
+        return out
+
+    def close(self) -> None:
+        self._fh.close()
 
 
 def check_files(contents: JournalContents, base) -> None:
@@ -464,6 +540,16 @@ class Journal:
         """Journal the layer file states a save is about to leave, synced."""
         self._write({"files": states})
         self.sync()
+
+    def flush(self) -> int:
+        """Hand what is written to the operating system (no disk flush); the size so far."""
+        try:
+            self._fh.flush()
+            return self._fh.tell()
+        except OSError as exc:
+            raise JournalWriteError(
+                f"{self.path}: cannot write the journal: {exc.strerror or exc}"
+            ) from exc
 
     def sync(self) -> None:
         try:

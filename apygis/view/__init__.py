@@ -14,6 +14,8 @@ machine's browser:
   own; every address under a secret token; view only);
 * :mod:`~apygis.view.feed` -- a map's hub, the session observer, and an
   orientation's control points as overlays;
+* :mod:`~apygis.view.process` -- a session's server in a process of its own,
+  fed through a pipe (serving pages takes nothing from the compilation);
 * ``static/`` -- the page: plain JavaScript drawing on a canvas, nothing
   loaded from elsewhere.
 
@@ -24,16 +26,29 @@ through :meth:`apygis.session.Session.subscribe`), the command line wires
 the two.
 """
 
-from apygis.view.feed import SessionFeed, control_overlays, map_hub, session_hub
+from apygis.view.feed import (
+    ChangeFeed,
+    SessionFeed,
+    SessionReplica,
+    control_overlays,
+    deliver,
+    map_hub,
+    session_hub,
+)
 from apygis.view.hub import Viewer, ViewHub
+from apygis.view.process import ViewProcess
 from apygis.view.server import ViewServer, is_loopback
 
 __all__ = [
+    "ChangeFeed",
     "SessionFeed",
+    "SessionReplica",
     "ViewHub",
+    "ViewProcess",
     "ViewServer",
     "Viewer",
     "control_overlays",
+    "deliver",
     "is_loopback",
     "map_hub",
     "session_hub",

@@ -1,11 +1,12 @@
 """Feeding the view: a map as it is, a session as it goes, an orientation's control points.
 
 :func:`map_hub` makes the :class:`~apygis.view.hub.ViewHub` of a map.
-:class:`SessionFeed` follows a running session
-(:meth:`apygis.session.Session.subscribe`): on the session's thread it reads
-only the records an event changed, and hands them to the server's loop,
-which never makes the session wait. :func:`control_overlays` turns a map
-orientation's control points and residuals into overlays.
+A running session is followed from the view's process
+(:mod:`apygis.view.process`): :class:`SessionReplica` replays the session's
+journal in an engine of its own and :class:`ChangeFeed` turns its effects
+into the hub's changes, while the session's side, :class:`SessionFeed`,
+only sends the floating mark and the status line. :func:`control_overlays`
+turns a map orientation's control points and residuals into overlays.
 
 Which records an entry changed: the records its effects name, and for line
 points their neighbours before (the references the feed last sent) and after
@@ -19,11 +20,14 @@ session's map whatever the topology.
 from __future__ import annotations
 
 import logging
+import os
+import threading
 from typing import Any
 
 import numpy as np
 
 from apygis.compile.events import (
+    RECORD_EFFECTS,
     Added,
     AreaShown,
     CrosshairScale,
@@ -38,18 +42,33 @@ from apygis.compile.events import (
     Status,
     Terminate,
     Undone,
+    ZeroPlates,
 )
 from apygis.model.map import MapFile
+from apygis.model.records import LINE_DTYPE, REF_FIELDS
 from apygis.model.symbols import load_library
 from apygis.plot.plotdef import PlotterDef
-from apygis.view.hub import DEFAULT_QUEUE_LIMIT, ViewHub
+from apygis.view.hub import DEFAULT_QUEUE_LIMIT, DELIVERY_INTERVAL_S, ViewHub
 from apygis.view.scene import TABLE_NAMES, Pens, layer_rows, map_meta, rows_of, symbol_table
 
-__all__ = ["SessionFeed", "control_overlays", "map_hub", "session_hub"]
+__all__ = [
+    "ChangeFeed",
+    "SessionFeed",
+    "SessionReplica",
+    "control_overlays",
+    "deliver",
+    "map_hub",
+    "session_hub",
+]
 
 log = logging.getLogger(__name__)
 
-_REFS = ["fwd", "back", "side1", "side2"]
+#: Effects that change nothing a page shows from the replica (the status line and the
+#: mark come from the session itself).
+_NOT_CHANGES = (Status, Plates, ZeroPlates)
+_LINE_FIELDS: tuple[str, ...] = tuple(LINE_DTYPE.names or ())
+#: Where the references begin in a line point's row (``num, x, y, z, code, fwd, ...``).
+_REF_AT = _LINE_FIELDS.index("fwd")
 
 
 def map_hub(
@@ -107,62 +126,211 @@ def session_hub(session, *, plotdef=None, library=None, queue_limit=DEFAULT_QUEU
 
 
 class SessionFeed:
-    """The session observer that feeds a :class:`~apygis.view.server.ViewServer`.
+    """The view of a running session, fed from the session's process.
 
-    Subscribe it with ``session.subscribe(feed)`` right after the server's hub
-    was made from the session (:func:`session_hub`), on the session's thread.
-    It costs the session a few microseconds per event: the floating mark and
-    status line are handed over as the latest value only, and an entry's
-    records are read from the map and handed over without waiting.
+    ``server`` is a started :class:`~apygis.view.process.ViewProcess` whose
+    hub was made from ``session`` (:func:`session_hub`); make the feed at
+    once after, on the session's thread (the journal is where the view's
+    process starts following).
+
+    The session does nothing for it: the view's process follows the
+    session's journal (:class:`SessionReplica`), which holds every event the
+    session acted on, entries on disk before they are acknowledged. A thread
+    of the feed's own reads the floating mark, the status line and the
+    display settings from the session at most every
+    :data:`~apygis.view.hub.DELIVERY_INTERVAL_S` (a tablet moves the mark
+    with every report; a page needs it no more often than a screen shows)
+    and sends them when they changed. The session never waits for it.
     """
 
     def __init__(self, server, session):
         self.server = server
         self.map_id = session.map.id
-        self._refs: dict[str, dict[int, tuple]] = {
-            lay.ext: _refs_of(lay.line_points) for lay in session.map
-        }
-        self._touched: set[str] = set()
-        self._box = server.mailbox(self._apply, self._flush_status)
+        self._session = session
         self._geometry = session.geometry
-        eng = session.engine
-        self._last = Status(eng.mode, eng.layer_ext, "", eng.mark(), {})
-        self.batches = 0
-
-    # ------------------------------------------------------------------ session thread
-
-    def __call__(self, session, event, effects: list) -> None:
-        changes = None
-        for e in effects:
-            t = type(e)
-            if t is Status:
-                self._last = e
-            elif t is not Plates:
-                if changes is None:
-                    changes = []
-                changes.append(e)
-        if changes is not None:
-            self._send(session, changes)
-        eng = session.engine
-        d = session.display
-        # the floating mark moves with every tablet report: the latest one is handed over
-        self._box.put((self._last, eng.mark_xy, eng.z_model, d.scale, d.crosshair))
+        lay = session.map.layers.get(session.engine.layer_ext)
+        self._counts = {t: len(lay.table(t)) for t in TABLE_NAMES} if lay is not None else {}
+        self._sent_key: tuple | None = None
+        self._stop = threading.Event()
+        self.deliveries = 0
+        offset = session.journal.flush()  # every event so far where the view's process reads it
+        fd = os.open(session.journal_path, os.O_RDONLY)
+        try:
+            server.follow(
+                {
+                    "path": str(session.journal_path),
+                    "offset": offset,
+                    "entries": int(session.entries),
+                    "display": _display(session),
+                    "geometry": session.geometry,
+                    "library": session.library,
+                },
+                fd,
+            )
+        finally:
+            os.close(fd)
+        self._thread = threading.Thread(target=self._run, name="apygis-view-feed", daemon=True)
+        self._thread.start()
 
     def end(self, session) -> None:
-        """The session is over: a last check of every layer, and ``ended`` for the pages."""
+        """The session is over: the rest of its journal, a last check of every layer, ``ended``."""
+        self.close()
         why = (
             "compilation terminated"
             if session.finished
             else "session not terminated: the journal is kept for a resume"
         )
-        self._post(
-            {
-                "full": {lay.ext: _copies(lay) for lay in session.map},
-                "ended": True,
-                "display": _display(session),
-                "messages": [why],
-            }
+        if not session.journal.closed:
+            session.journal.flush()
+        change = {
+            "full": {lay.ext: _copies(lay) for lay in session.map},
+            "ended": True,
+            "display": _display(session),
+            "messages": [why],
+        }
+        self.server.send([change], *self._status())
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Stop the feed's thread (idempotent)."""
+        self._stop.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join(timeout)
+
+    # ------------------------------------------------------------------ the feed's thread
+
+    def _run(self) -> None:
+        while not self._stop.wait(DELIVERY_INTERVAL_S):
+            try:
+                status, display = self._status(changed_only=True)
+                if status is not None:
+                    self.deliveries += 1
+                    if not self.server.send([], status, display):
+                        return
+                elif self.server.closed:
+                    return
+            except Exception:
+                log.exception("view: the status line could not be delivered")
+                return
+
+    def _status(self, changed_only: bool = False):
+        """``(status, display)`` as the session has them now; None, None if unchanged."""
+        sess = self._session
+        eng = sess.engine
+        d = sess.display
+        key = (eng.mode, eng.layer_ext, eng.buf, eng.mark_xy, eng.z_model, d.scale, d.crosshair)
+        if changed_only and key == self._sent_key:
+            return None, None
+        self._sent_key = key
+        xy, z_model = key[3], key[4]
+        mark = None
+        if xy is not None:
+            mark = (xy[0], xy[1], self._geometry.correct_z(xy[0], xy[1], z_model))
+        lay = sess.map.layers.get(eng.layer_ext)
+        if lay is not None:
+            self._counts = {t: len(lay.table(t)) for t in TABLE_NAMES}
+        status = _status_dict(eng.mode, eng.layer_ext, eng.buf, mark, self._counts, self.map_id)
+        return status, {"scale": key[5], "crosshair": key[6]}
+
+
+class SessionReplica:
+    """A session's engine replayed from its journal, in the view's process.
+
+    The engine is deterministic (a journal recovers a session exactly, see
+    :mod:`apygis.session.journal`): replaying the journal's events over the
+    map of its head, with the session's geometry, symbol library and
+    settings, gives the same records, entries and effects as the session's
+    own engine, without costing the session anything. :meth:`catch_up`
+    replays what the journal has gained since the last call and returns the
+    hub's changes (:class:`ChangeFeed`).
+
+    Parameters
+    ----------
+    fh : file
+        The journal opened for reading (binary, from its start).
+    spec : dict
+        ``path`` (for messages), ``offset`` (the journal's size when the view
+        started: the events up to it are replayed without changes, the hub
+        holds their result already), ``entries`` (the session's entries
+        then), ``display``, ``geometry`` and ``library``.
+    """
+
+    def __init__(self, fh, spec: dict):
+        from apygis.compile.engine import Engine
+        from apygis.session.journal import JournalTail
+        from apygis.session.runner import DisplayState
+
+        self.tail = JournalTail(fh, spec["path"])
+        self.map = self.tail.map
+        self.geometry = spec["geometry"]
+        s = self.tail.settings
+        self.engine = Engine(
+            self.map,
+            self.tail.layer,
+            self.geometry,
+            library=spec["library"],
+            snap_mm=s.get("snap_mm", 1.0),
+            sample_tolerance_mm=s.get("sample_tolerance_mm", 0.2),
+            autosave_every=s.get("autosave_every", 50),
+            start_z_m=s.get("start_z_m", 0.0),
         )
+        self.display = DisplayState(**spec["display"])
+        self.entries = 0
+        self.finished = False
+        for ev in self.tail.read(upto=spec["offset"]):
+            self._handle(ev)
+        self.entries = int(spec["entries"])
+        self.feed = ChangeFeed(self)
+
+    def _handle(self, ev) -> list:
+        effects = self.engine.handle(ev)
+        for e in effects:  # what the session keeps of them (Session._effect)
+            if isinstance(e, RECORD_EFFECTS):
+                self.entries += 1
+            elif isinstance(e, DisplayScale):
+                self.display.scale = e.factor
+            elif isinstance(e, CrosshairScale):
+                self.display.crosshair = e.factor
+            elif isinstance(e, Terminate):
+                self.finished = True
+        return effects
+
+    def catch_up(self) -> list[dict]:
+        """Replay the events the journal gained; the hub's changes they make."""
+        feed = self.feed
+        for ev in self.tail.read():
+            feed(self, self._handle(ev))
+        return feed.take()
+
+
+class ChangeFeed:
+    """What the pages need from a replayed session's effects: the hub's changes.
+
+    Which records an entry changed: the records its effects name, and for
+    line points their neighbours before (the references the feed last sent)
+    and after (the references they have now), since adding, splitting,
+    joining and deleting line points re-link their neighbours. After an UNDO
+    (the layer as it was) and at every save (a check), the layers concerned
+    are sent whole and the hub compares them with what the pages have, so the
+    pages end equal to the session's map whatever the topology.
+    """
+
+    def __init__(self, session):
+        self._refs: dict[str, dict[int, tuple]] = {
+            lay.ext: _refs_of(lay.line_points) for lay in session.map
+        }
+        self._touched: set[str] = set()
+        self._pos: dict[tuple[str, str], dict[int, int]] = {}  # where a number was found last
+        self._out: list[dict] = []
+
+    def __call__(self, session, effects: list) -> None:
+        changes = [e for e in effects if type(e) not in _NOT_CHANGES]
+        if changes:
+            self._send(session, changes)
+
+    def take(self) -> list[dict]:
+        """The changes made since the last call."""
+        out, self._out = self._out, []
+        return out
 
     def _send(self, session, changes: list) -> None:
         m = session.map
@@ -237,11 +405,8 @@ class SessionFeed:
             if table == "line_points":
                 found, gone = self._line_points(ext, lay.line_points, want)
             else:
-                arr = lay.table(table)
-                found = arr[_having(arr["num"], want)]
-                have = set(found["num"].tolist())
-                gone = [n for n in want if n not in have]
-            if len(found):
+                found, gone = self._rows(ext, table, lay.table(table), want)
+            if found:
                 upsert.setdefault(ext, {})[table] = found
             if gone:
                 remove.setdefault(ext, {})[table] = gone
@@ -274,50 +439,69 @@ class SessionFeed:
             old = refs.get(n)
             if old is not None:
                 ask.update(r for r in old if r >= 0)
-        nums = lp["num"]
-        mask = _having(nums, ask)
-        found_nums = set(nums[mask].tolist())
-        now = lp[mask]
-        more = {int(r) for f in _REFS for r in now[f].tolist() if r >= 0} - found_nums - ask
+        found, gone = self._rows(ext, "line_points", lp, ask)
+        more = {r for t in found for r in t[_REF_AT:] if r >= 0} - ask
         if more:
-            mask |= _having(nums, more)
-            now = lp[mask]
-            found_nums = set(nums[mask].tolist())
-        gone = [n for n in ask if n not in found_nums]
+            found.extend(self._rows(ext, "line_points", lp, more)[0])
         for n in gone:
             refs.pop(n, None)
-        refs.update(_refs_of(now))
-        return now.copy(), gone
+        for t in found:
+            refs[t[0]] = t[_REF_AT:]
+        return found, gone
+
+    def _rows(self, ext: str, table: str, arr: np.ndarray, want: set[int]):
+        """The rows (tuples) of the numbers in ``want`` in table ``arr``, and the numbers not there.
+
+        An entry names a few records of a table of any size: each is looked
+        for first where it was found last (a new record: the last row), which
+        costs a row's read; only those not there (rows shifted by a deletion)
+        are searched for.
+        """
+        pos = self._pos.setdefault((ext, table), {})
+        size = len(arr)
+        item = arr.item
+        rows: list[tuple] = []
+        missing: list[int] = []
+        for n in want:
+            i = pos.get(n, size - 1)
+            if 0 <= i < size:
+                t = item(i)
+                if t[0] == n:
+                    pos[n] = i
+                    rows.append(t)
+                    continue
+            missing.append(n)
+        if not missing:
+            return rows, []
+        nums = arr["num"]
+        if len(missing) == 1:
+            idx = np.flatnonzero(nums == missing[0]).tolist()
+        else:
+            idx = np.flatnonzero(np.isin(nums, missing)).tolist()
+        found = set()
+        for i in idx:
+            t = item(i)
+            pos[t[0]] = i
+            found.add(t[0])
+            rows.append(t)
+        gone = [n for n in missing if n not in found]
+        for n in gone:
+            pos.pop(n, None)
+        return rows, gone
 
     def _post(self, change: dict) -> None:
-        self.batches += 1
-        self._box.add(change)
-
-    def _apply(self, changes: list[dict]) -> None:  # on the server's loop
-        _apply(self.server.hub, changes)
-
-    # ------------------------------------------------------------------ server loop
-
-    def _flush_status(self, value) -> None:
-        st, xy, z_model, scale, crosshair = value
-        mark = None
-        if xy is not None:
-            mark = (xy[0], xy[1], self._geometry.correct_z(xy[0], xy[1], z_model))
-        counts = st.counts or self.server.hub.status.get("counts", {})
-        self.server.hub.set_status(
-            _status_dict(st.mode, st.layer, st.prompt, mark, counts, self.map_id),
-            {"scale": scale, "crosshair": crosshair},
-        )
+        self._out.append(change)
 
 
-def _having(nums: np.ndarray, wanted: set[int]) -> np.ndarray:
-    """The mask of the rows whose number is in ``wanted`` (an entry names a few)."""
-    if len(wanted) > 8:
-        return np.isin(nums, np.fromiter(wanted, np.int64, len(wanted)))
-    mask = np.zeros(len(nums), dtype=bool)
-    for n in wanted:
-        mask |= nums == n
-    return mask
+def deliver(hub: ViewHub, changes: list[dict], status: dict | None, display: dict | None) -> None:
+    """On the server's loop: a feed's changes (arrays to rows) to the hub, then its status line.
+
+    The changes become one delta (:meth:`ViewHub.apply_all`).
+    """
+    if changes:
+        _apply(hub, changes)
+    if status is not None:
+        hub.set_status(status, display)
 
 
 def _display(session) -> dict[str, float]:
@@ -334,7 +518,7 @@ def _refs_of(lp: np.ndarray) -> dict[int, tuple]:
     return dict(
         zip(
             lp["num"].tolist(),
-            zip(*(lp[f].tolist() for f in _REFS), strict=True),
+            zip(*(lp[f].tolist() for f in REF_FIELDS), strict=True),
             strict=True,
         )
     )
@@ -347,7 +531,8 @@ def _apply(hub: ViewHub, changes: list[dict]) -> None:
             if key in change:
                 change[key] = {
                     ext: {
-                        t: rows_of(a) if isinstance(a, np.ndarray) else a for t, a in tables.items()
+                        t: rows_of(a) if isinstance(a, np.ndarray) else [list(r) for r in a]
+                        for t, a in tables.items()
                     }
                     for ext, tables in change[key].items()
                 }

@@ -1,10 +1,12 @@
 """The view's web server: a local page over HTTP, pushed to over a WebSocket.
 
 :class:`ViewServer` runs an aiohttp application on an event loop in a
-thread of its own, so that the program that feeds it (a session, an
-orientation) never waits for it: other threads hand it changes with
-:meth:`ViewServer.post` and a :class:`Mailbox`, which only schedule work on
-the loop.
+thread of its own, so that the program that feeds it never waits for it:
+other threads hand it work with :meth:`ViewServer.post` (or a feed's
+changes with :meth:`ViewServer.send`), which only schedule it on the loop.
+``apygis view`` and ``orient map --view`` serve this way; a session's view
+runs it in a process of its own (:mod:`apygis.view.process`), so that
+serving pages takes no time from the compilation.
 
 Addresses (every one under the secret token, so that another user of the
 machine, who cannot read the URL printed to this terminal, gets ``403``)::
@@ -30,16 +32,16 @@ import logging
 import secrets
 import socket
 import threading
-from collections import deque
 from collections.abc import Callable
 from importlib import resources
 from typing import Any
 from urllib.parse import urlsplit
 
 from apygis.errors import ViewError
-from apygis.view.hub import DELIVERY_INTERVAL_S, STATUS_INTERVAL_S, Viewer, ViewHub
+from apygis.view.feed import deliver
+from apygis.view.hub import Viewer, ViewHub
 
-__all__ = ["Mailbox", "ViewServer", "is_loopback"]
+__all__ = ["ViewServer", "bind_socket", "is_loopback", "page_url"]
 
 log = logging.getLogger(__name__)
 
@@ -66,79 +68,43 @@ def is_loopback(host: str) -> bool:
         return False
 
 
+def page_url(host: str, port: int, token: str) -> str:
+    """The address of the page served on ``host:port`` under ``token``."""
+    if host in ("0.0.0.0", "::", ""):
+        host = "127.0.0.1"
+    if ":" in host:
+        host = f"[{host}]"
+    return f"http://{host}:{port}/{token}/"
+
+
+def bind_socket(host: str, port: int) -> socket.socket:
+    """A listening, non-blocking socket on ``host:port`` (0: a free port).
+
+    Raises
+    ------
+    ViewError
+        The host is not this machine's, or the port is in use or not allowed.
+    """
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except socket.gaierror as exc:
+        raise ViewError(f"view: cannot serve on host {host!r}: {exc.strerror}") from None
+    family, _, _, _, addr = infos[0]
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(addr)
+        sock.listen(16)
+    except OSError as exc:
+        sock.close()
+        raise ViewError(f"view: cannot serve on {host}:{port}: {exc.strerror or exc}") from None
+    sock.setblocking(False)
+    return sock
+
+
 def _static_files() -> dict[str, tuple[bytes, str]]:
     pkg = resources.files("apygis.view") / "static"
     return {key: ((pkg / name).read_bytes(), ctype) for key, (name, ctype) in _STATIC.items()}
-
-
-class Mailbox:
-    """Changes and the latest status, handed from another thread to the server's loop.
-
-    :meth:`add` (any thread) queues a change, to be applied in order;
-    :meth:`put` keeps only the latest status. Neither waits: each only
-    schedules a delivery on the loop unless one is due already. A delivery
-    applies the changes queued since the last one, all together and in order
-    (``apply(changes)``: one delta for the pages, not one each), then the latest status
-    (``status(value)``, at most every :data:`~apygis.view.hub.STATUS_INTERVAL_S`),
-    and the next one comes no sooner than ``interval`` seconds later, so that a
-    busy producer wakes the loop at most ``1 / interval`` times a second;
-    nothing queued is ever lost, and the last status always arrives.
-    """
-
-    def __init__(
-        self,
-        server: ViewServer,
-        apply: Callable[[list[Any]], None],
-        status: Callable[[Any], None],
-        interval: float,
-    ):
-        self._server = server
-        self._apply = apply
-        self._status = status
-        self._interval = interval
-        self._queue: deque[Any] = deque()
-        self._value: Any = None
-        self._dirty = False
-        self._armed = False
-        self._status_at = -1e9
-
-    def add(self, change: Any) -> None:
-        self._queue.append(change)
-        self._wake()
-
-    def put(self, value: Any) -> None:
-        self._value = value
-        self._dirty = True
-        self._wake()
-
-    def _wake(self) -> None:
-        if not self._armed:
-            self._armed = True
-            self._server.post(self._deliver)
-
-    def _deliver(self) -> None:  # on the loop
-        try:
-            if self._queue:
-                changes = []
-                while self._queue:  # the producer may append meanwhile: taken one by one
-                    changes.append(self._queue.popleft())
-                self._server._run_safely(self._apply, (changes,))
-            loop = self._server.loop
-            now = loop.time() if loop is not None else 0.0
-            if self._dirty and now - self._status_at >= STATUS_INTERVAL_S:
-                self._dirty = False
-                self._status_at = now
-                self._server._run_safely(self._status, (self._value,))
-        finally:
-            loop = self._server.loop
-            if loop is not None:
-                loop.call_later(self._interval, self._rearm)
-
-    def _rearm(self) -> None:  # on the loop
-        self._armed = False
-        if self._queue or self._dirty:
-            self._armed = True
-            self._deliver()
 
 
 class ViewServer:
@@ -154,12 +120,22 @@ class ViewServer:
         Port; 0 takes a free one (the URL says which).
     token : str, optional
         The secret in every address; default a random one (128 bits).
+    sock : socket.socket, optional
+        A socket already bound and listening (:func:`bind_socket`), served
+        instead of binding ``host:port``.
     """
 
-    def __init__(self, hub: ViewHub | None, host: str = "127.0.0.1", port: int = 0, token=None):
+    def __init__(
+        self,
+        hub: ViewHub | None,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        token=None,
+        sock: socket.socket | None = None,
+    ):
         self.hub: ViewHub = hub  # type: ignore[assignment]  # set before start() where None
         self.host = host
-        self.port = port
+        self.port = sock.getsockname()[1] if sock is not None else port
         self.token = token or secrets.token_urlsafe(16)
         self.loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
@@ -168,7 +144,7 @@ class ViewServer:
         self._error: BaseException | None = None
         self._runner: Any = None
         self._sockets: set[Any] = set()
-        self._sock: socket.socket | None = None
+        self._sock: socket.socket | None = sock
         self._connected = threading.Event()
         self._closed = False
 
@@ -177,12 +153,12 @@ class ViewServer:
     @property
     def url(self) -> str:
         """The page's address, token included."""
-        host = self.host
-        if host in ("0.0.0.0", "::", ""):
-            host = "127.0.0.1"
-        if ":" in host:
-            host = f"[{host}]"
-        return f"http://{host}:{self.port}/{self.token}/"
+        return page_url(self.host, self.port, self.token)
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`stop` was called."""
+        return self._closed
 
     def bind(self) -> None:
         """Take the address now (a command checks it before it writes anything).
@@ -193,27 +169,8 @@ class ViewServer:
             The host is not this machine's, or the port is in use or not allowed.
         """
         if self._sock is None:
-            self._sock = self._bind()
-
-    def _bind(self) -> socket.socket:
-        try:
-            infos = socket.getaddrinfo(self.host, self.port, type=socket.SOCK_STREAM)
-        except socket.gaierror as exc:
-            raise ViewError(f"view: cannot serve on host {self.host!r}: {exc.strerror}") from None
-        family, _, _, _, addr = infos[0]
-        sock = socket.socket(family, socket.SOCK_STREAM)
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            sock.bind(addr)
-            sock.listen(16)
-        except OSError as exc:
-            sock.close()
-            raise ViewError(
-                f"view: cannot serve on {self.host}:{self.port}: {exc.strerror or exc}"
-            ) from None
-        sock.setblocking(False)
-        self.port = sock.getsockname()[1]
-        return sock
+            self._sock = bind_socket(self.host, self.port)
+            self.port = self._sock.getsockname()[1]
 
     def start(self, timeout: float = 30.0) -> str:
         """Bind, start the thread, and return the URL once the page can be loaded.
@@ -383,10 +340,16 @@ class ViewServer:
         except Exception:
             log.exception("view: a change could not be applied")
 
-    def mailbox(self, apply: Callable[[list[Any]], None], status: Callable[[Any], None]) -> Mailbox:
-        """A :class:`Mailbox` onto this server's loop, delivering at most every
-        :data:`~apygis.view.hub.DELIVERY_INTERVAL_S`."""
-        return Mailbox(self, apply, status, DELIVERY_INTERVAL_S)
+    def send(self, changes: list[dict], status: dict | None, display: dict | None) -> bool:
+        """Hand a feed's changes and latest status line to the hub, without waiting.
+
+        The in-process counterpart of :meth:`apygis.view.process.ViewProcess.send`
+        (see :func:`apygis.view.feed.deliver`). False once the server is stopped.
+        """
+        if self._closed or self.loop is None:
+            return False
+        self.post(deliver, self.hub, changes, status, display)
+        return True
 
     def wait_for_viewer(self, timeout: float) -> bool:
         """Wait until a page has connected (True), or ``timeout`` seconds (False)."""

@@ -223,16 +223,16 @@ def test_display_scale_crosshair_and_mark_act_on_the_page(chrome, tmp_path):
     from apygis.compile.oriented import OrientedGeometry
     from apygis.orient.io import load_orientation
     from apygis.session import Session
-    from apygis.view import SessionFeed, ViewServer, session_hub
+    from apygis.view import SessionFeed, ViewProcess, session_hub
     from tests.conftest import SAMPLES
     from tests.view.wsclient import WsClient
 
     apygis.write(apygis.read(SAMPLES / "ZH1091"), tmp_path / "ZH1091", driver="apy")
     geometry = OrientedGeometry(load_orientation(SAMPLES / "session" / "ZH1091.orientation.json"))
     sess = Session(tmp_path / "ZH1091", geometry, layer="r")
-    server = ViewServer(session_hub(sess))
+    server = ViewProcess(session_hub(sess))
     server.start()
-    sess.subscribe(SessionFeed(server, sess))
+    feed = SessionFeed(server, sess)
     other = WsClient(server.url)  # a second page at the same time
     try:
         chrome.get(server.url)
@@ -286,6 +286,7 @@ def test_display_scale_crosshair_and_mark_act_on_the_page(chrome, tmp_path):
             k: {t: sorted(r) for t, r in v.items()} for k, v in want.items()
         }
     finally:
+        feed.close()
         other.close()
         server.stop()
         sess.close()

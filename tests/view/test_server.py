@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import os
+import signal
+import threading
 import time
 import urllib.error
 import urllib.request
@@ -20,7 +23,7 @@ from apygis.instrument.replay import Replayer, check_recording
 from apygis.instrument.tablet import TabletConfig, make_parser
 from apygis.orient.io import load_orientation
 from apygis.session import ReportDecoder, Session
-from apygis.view import SessionFeed, Viewer, ViewHub, ViewServer, map_hub, session_hub
+from apygis.view import SessionFeed, Viewer, ViewHub, ViewProcess, ViewServer, map_hub, session_hub
 from apygis.view.scene import Pens, layer_rows
 from tests.conftest import SAMPLES
 from tests.view.wsclient import WsClient
@@ -231,12 +234,15 @@ def _replay_events(sess):
     return out
 
 
+def _want(m) -> dict:
+    return {k: {t: sorted(r) for t, r in v.items()} for k, v in _rows(m).items()}
+
+
 def test_pages_opened_before_and_during_a_session_end_equal_to_its_map(tmp_path):
     sess = _session(tmp_path)
-    server = ViewServer(session_hub(sess))
+    server = ViewProcess(session_hub(sess))
     server.start()
     feed = SessionFeed(server, sess)
-    sess.subscribe(feed)
     events = _replay_events(sess)
     early = WsClient(server.url)
     slow = WsClient(server.url, read=False)  # reads nothing until the end
@@ -251,8 +257,11 @@ def test_pages_opened_before_and_during_a_session_end_equal_to_its_map(tmp_path)
         late.wait(lambda m: m.seq >= 0)
         first = late.mirror.kinds[0]
         assert first == "state"
-        for ev in events[half:]:
+        for ev in events[half:-1]:
             sess.handle(ev)
+        # replayed from the journal in the view's process: the same records, before any check
+        early.wait(lambda m: len(m.entries) == sess.entries and m.records() == _want(sess.map))
+        sess.handle(events[-1])
         assert sess.finished
         feed.end(sess)
         slow.start_reading()
@@ -282,15 +291,16 @@ def test_pages_opened_before_and_during_a_session_end_equal_to_its_map(tmp_path)
 
 
 def test_the_session_never_waits_for_the_view(tmp_path):
-    """A server whose loop is stuck (a page hogging it) costs the session nothing."""
+    """A view's process that is stuck (stopped for 2 s) costs the session nothing."""
     sess = _session(tmp_path)
-    server = ViewServer(session_hub(sess))
+    server = ViewProcess(session_hub(sess))
     server.start()
-    sess.subscribe(SessionFeed(server, sess))
+    feed = SessionFeed(server, sess)
     client = WsClient(server.url)
     try:
         client.wait(lambda m: m.seq == 0)
-        server.post(time.sleep, 2.0)  # the loop is blocked for 2 s
+        os.kill(server.pid, signal.SIGSTOP)
+        threading.Timer(2.0, os.kill, (server.pid, signal.SIGCONT)).start()
         geometry = sess.geometry
         t0 = time.perf_counter()
         sess.handle(Press("DESCR"))
@@ -300,7 +310,7 @@ def test_the_session_never_waits_for_the_view(tmp_path):
             sess.handle(Mark(*geometry.tablet(2683500.0 + 10 * k, 1247900.0)))
             sess.handle(Press("ENTER"))
         took = time.perf_counter() - t0
-        assert took < 1.5, took  # had it waited for the loop, it would take 2 s or more
+        assert took < 1.5, took  # had it waited for the view, it would take 2 s or more
         assert sess.entries == 40
         client.wait(lambda m: len(m.entries) == 40, timeout=15)
         rows = _rows(sess.map)["t"]["line_points"] if "t" in sess.map.layers else None
@@ -310,6 +320,7 @@ def test_the_session_never_waits_for_the_view(tmp_path):
         )
         del rows
     finally:
+        feed.close()
         client.close()
         server.stop()
         sess.close()
@@ -317,9 +328,9 @@ def test_the_session_never_waits_for_the_view(tmp_path):
 
 def test_a_closed_page_and_a_failing_observer_do_not_stop_the_session(tmp_path):
     sess = _session(tmp_path)
-    server = ViewServer(session_hub(sess))
+    server = ViewProcess(session_hub(sess))
     server.start()
-    sess.subscribe(SessionFeed(server, sess))
+    feed = SessionFeed(server, sess)
     calls = []
 
     def broken(session, event, effects):
@@ -341,6 +352,30 @@ def test_a_closed_page_and_a_failing_observer_do_not_stop_the_session(tmp_path):
         sess.handle(Mark(*sess.geometry.tablet(2683700.0, 1247950.0)))
         sess.handle(Press("ENTER"))
         assert sess.entries == 2
+        feed._thread.join(2.0)  # the feed's thread saw the server go, and ended
+        assert not feed._thread.is_alive()
+    finally:
+        server.stop()
+        sess.close()
+
+
+def test_a_killed_view_process_does_not_stop_the_session(tmp_path):
+    sess = _session(tmp_path)
+    server = ViewProcess(session_hub(sess))
+    server.start()
+    feed = SessionFeed(server, sess)
+    try:
+        for b in ("DESCR", "1", "ENTER", "0", "6", "ENTER"):
+            sess.handle(Press(b))
+        os.kill(server.pid, signal.SIGKILL)
+        for k in range(30):
+            sess.handle(Mark(*sess.geometry.tablet(2683600.0 + 5 * k, 1247950.0)))
+            sess.handle(Press("ENTER"))
+        assert sess.entries == 30
+        feed.end(sess)  # told nobody: no error
+        feed._thread.join(2.0)
+        assert not feed._thread.is_alive()
+        assert server.closed
     finally:
         server.stop()
         sess.close()
