@@ -65,8 +65,7 @@ class OrientedGeometry:
         return (motors.step_um / 1000.0) / dp_mm_per_m
 
     def ground(self, x_mm, y_mm):
-        X, Y = self._t.forward(np.array([x_mm, y_mm], dtype=float))
-        return float(X), float(Y)
+        return self._t.forward_xy(x_mm, y_mm)
 
     def tablet(self, X, Y):
         x, y = self._t.inverse(np.array([X, Y], dtype=float))

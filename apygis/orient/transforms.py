@@ -167,6 +167,11 @@ class ConformalTransform(_Transform):
         out[..., 1] = self.b * p[..., 0] + self.a * p[..., 1] + self.d
         return out
 
+    def forward_xy(self, x: float, y: float) -> tuple[float, float]:
+        """:meth:`forward` of one position, as floats (see :meth:`_Transform.forward_xy`)."""
+        x, y = float(x), float(y)
+        return self.a * x - self.b * y + self.c, self.b * x + self.a * y + self.d
+
     def inverse(self, points):
         """Ground ``(..., 2)`` -> tablet ``(..., 2)``."""
         p = _xy(points)
@@ -207,6 +212,11 @@ class AffineTransform(_Transform):
         out[..., 0] = self.a * p[..., 0] + self.b * p[..., 1] + self.c
         out[..., 1] = self.d * p[..., 0] + self.e * p[..., 1] + self.f
         return out
+
+    def forward_xy(self, x: float, y: float) -> tuple[float, float]:
+        """:meth:`forward` of one position, as floats (see :meth:`_Transform.forward_xy`)."""
+        x, y = float(x), float(y)
+        return self.a * x + self.b * y + self.c, self.d * x + self.e * y + self.f
 
     def inverse(self, points):
         """Ground ``(..., 2)`` -> tablet ``(..., 2)``."""
@@ -252,6 +262,15 @@ class BilinearTransform(_Transform):
         out[..., 0] = self.a0 + self.a1 * x + self.a2 * y + self.a3 * xy
         out[..., 1] = self.b0 + self.b1 * x + self.b2 * y + self.b3 * xy
         return out
+
+    def forward_xy(self, x: float, y: float) -> tuple[float, float]:
+        """:meth:`forward` of one position, as floats (see :meth:`_Transform.forward_xy`)."""
+        x, y = float(x), float(y)
+        xy = x * y
+        return (
+            self.a0 + self.a1 * x + self.a2 * y + self.a3 * xy,
+            self.b0 + self.b1 * x + self.b2 * y + self.b3 * xy,
+        )
 
     def jacobian(self, points):
         """``d(X, Y)/d(x, y)``, shape ``(..., 2, 2)``."""

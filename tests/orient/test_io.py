@@ -57,6 +57,22 @@ def test_transform_round_trip_exact(cls, vals):
     assert loads(dumps(o)).map_transform == o.map_transform
 
 
+@settings(max_examples=200, deadline=None)
+@given(
+    st.sampled_from([ConformalTransform, AffineTransform, BilinearTransform]),
+    st.lists(st.floats(-1e7, 1e7, allow_nan=False), min_size=8, max_size=8),
+    st.floats(-1e4, 1e4, allow_nan=False),
+    st.floats(-1e4, 1e4, allow_nan=False),
+)
+def test_one_position_is_transformed_to_the_same_bits(cls, vals, x, y):
+    """forward_xy (the real-time path, floats) is forward (arrays) to the last bit."""
+    t = cls(*vals[: len(cls.__dataclass_fields__)])
+    X, Y = t.forward([x, y])
+    got = t.forward_xy(x, y)
+    assert type(got[0]) is float
+    assert got == (float(X), float(Y))
+
+
 def test_empty_orientation_round_trip():
     o = loads(dumps(Orientation()))
     assert o.map_transform is None
