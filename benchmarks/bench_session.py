@@ -19,11 +19,24 @@ photos with plate motors), a CalComp tablet at 40 counts/mm.
 * ``view_overhead_pct``: the session of ``session_events_per_s`` with and
   without the graphic display (``--view``: the view's process following the
   session's journal, the feed thread sending the mark and status line, one
-  page connected as a WebSocket client in another process), run alternately ``--view-rounds`` times each; the best time of
-  each, in per cent of the run without. ``view_noise_pct``: how much the
-  runs without the view differ among themselves (the best of the odd runs
-  against the best of the even ones): an overhead below it is not measurable
-  on this machine (the journal's fsyncs make these runs noisy).
+  page connected as a WebSocket client in another process), run alternately
+  ``--view-rounds`` times each; the best time of each, in per cent of the run
+  without. ``view_noise_pct``: how much the runs without the view differ
+  among themselves (the best of the odd runs against the best of the even
+  ones): an overhead below it is not measurable on this machine.
+* What that time is made of: ``view_cpu_overhead_pct``, the session
+  process's CPU time (every thread: the engine, the journal, the motors, the
+  feed thread) with the view against without;
+  ``view_overhead_excl_sync_pct``, its time outside the journal's fsyncs;
+  ``sync_wait_s`` / ``sync_wait_view_s``, the time it waited for the fsyncs
+  (1200 of them) without and with the view; ``view_processes_cpu_s``, the
+  CPU the view's and the page's processes used meanwhile.
+* The peer: the same run without the view, beside a process that keeps a
+  core busy the same share of the time as the view's and the page's
+  processes did, in 4 ms ticks (``peer_load_duty``): ``peer_overhead_pct``,
+  and ``view_to_peer_time_ratio`` the view's best time over the peer's (on
+  a two-core virtual machine another busy process lengthens the fsyncs,
+  whatever it does).
 * ``view_latency_ms_p50`` / ``view_latency_ms_p99``: from the moment the
   session is handed an ENTER until the page (a WebSocket client in another
   process, timestamps on the same monotonic clock) has received the delta of
@@ -46,6 +59,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import shutil
 import sys
 import tempfile
@@ -158,30 +172,108 @@ class Page:
         return got
 
 
-def session_run(sample, geometry, evs, view: bool) -> tuple[float, int]:
-    """Seconds for ``evs`` through a Session (journal, motors), with or without the view."""
+class SyncClock:
+    """The time the session waits for the journal's fsyncs (wrapped around Journal.sync)."""
+
+    def __init__(self):
+        from apygis.session.journal import Journal
+
+        self.seconds = 0.0
+        inner = Journal.sync
+
+        def sync(journal):
+            t = time.perf_counter()
+            try:
+                inner(journal)
+            finally:
+                self.seconds += time.perf_counter() - t
+
+        Journal.sync = sync  # type: ignore[method-assign]
+
+
+def _cpu_s(pid: int) -> float:
+    """User + system CPU seconds of process ``pid`` so far (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+LOAD = r"""
+import sys, time
+duty, tick = float(sys.argv[1]), 0.004
+print("busy", flush=True)
+while True:
+    t = time.perf_counter()
+    while time.perf_counter() - t < duty * tick:
+        pass
+    time.sleep(tick * (1.0 - duty))
+"""
+
+
+class Load:
+    """A process that keeps a core busy ``duty`` of the time, in 4 ms ticks (as the view's does)."""
+
+    def __init__(self, duty: float):
+        import subprocess
+
+        duty = min(max(duty, 0.0), 1.0)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", LOAD, str(float(duty))], stdout=subprocess.PIPE, text=True
+        )
+        assert self.proc.stdout is not None
+        assert self.proc.stdout.readline().strip() == "busy"
+
+    def stop(self) -> None:
+        self.proc.kill()
+        self.proc.wait()
+
+
+def session_run(
+    sample, geometry, evs, view: bool, clock: SyncClock, load: float | None = None
+) -> dict[str, float]:
+    """``evs`` through a Session (journal, motors), with or without the view.
+
+    With ``load`` (and no view), a :class:`Load` of that duty runs meanwhile
+    (the peer: what another process using the CPU as the view's does costs).
+
+    Returns seconds: ``wall``, ``cpu`` (this process, every thread), ``sync``
+    (waiting for the journal's fsyncs), ``view_cpu`` (the view's process and
+    the page's, 0 without), and ``entries``.
+    """
     from apygis.view import SessionFeed, ViewProcess, session_hub
 
     tmp = Path(tempfile.mkdtemp())
-    server = page = feed = None
+    server = page = feed = peer = None
     try:
         apygis.write(sample, tmp / "ZH1091")
         ctl = MotorController(SimPort(SimulatedGrbl()), name="sim")
         ctl.connect(reset=True)
         sess = Session(tmp / "ZH1091", geometry, layer="t", motors=ctl)
+        if load is not None:
+            peer = Load(load)
         if view:
             server = ViewProcess(session_hub(sess))
             server.start()
             feed = SessionFeed(server, sess)
             page = Page(server.url)
+        others = [] if server is None or page is None else [server.pid, page.proc.pid]
+        before = sum(_cpu_s(p) for p in others)
+        clock.seconds = 0.0
+        c0 = time.process_time()
         t0 = time.perf_counter()
         for ev in evs:
             sess.handle(ev)
-        dt = time.perf_counter() - t0
-        entries = sess.entries
+        out = {
+            "wall": time.perf_counter() - t0,
+            "cpu": time.process_time() - c0,
+            "sync": clock.seconds,
+            "view_cpu": sum(_cpu_s(p) for p in others) - before,
+            "entries": sess.entries,
+        }
         sess.close()
-        return dt, entries
+        return out
     finally:
+        if peer is not None:
+            peer.stop()
         if feed is not None:
             feed.close()
         if page is not None:
@@ -258,7 +350,7 @@ def main() -> None:
     ap.add_argument("--reports", type=int, default=50_000)
     ap.add_argument("--view-events", type=int, default=60_000)
     ap.add_argument("--view-entries", type=int, default=300)
-    ap.add_argument("--view-rounds", type=int, default=5)
+    ap.add_argument("--view-rounds", type=int, default=7)
     args = ap.parse_args()
     orientation = load_orientation(ROOT / "samples" / "session" / "ZH1091.orientation.json")
     geometry = OrientedGeometry(orientation)
@@ -330,22 +422,52 @@ def main() -> None:
 
     # the graphic display: what it costs the session, and how soon a page has an entry
     vevs = events(geometry, args.view_events)
-    runs: dict[bool, list[float]] = {False: [], True: []}
+    clock = SyncClock()
+    runs: dict[bool | str, list[dict[str, float]]] = {False: [], True: [], "peer": []}
     for _ in range(args.view_rounds):
         for view in (False, True):
-            dt, n = session_run(sample, geometry, vevs, view)
-            runs[view].append(dt)
-    best = {view: min(times) for view, times in runs.items()}
-    figures["view_overhead_pct"] = round(100.0 * (best[True] - best[False]) / best[False], 2)
+            runs[view].append(session_run(sample, geometry, vevs, view, clock))
+        duty = np.median([r["view_cpu"] / r["wall"] for r in runs[True]])
+        runs["peer"].append(session_run(sample, geometry, vevs, False, clock, load=duty))
+
+    def best(view: bool | str, key) -> float:
+        return min(key(r) for r in runs[view])
+
+    def pct(key, view: bool | str = True) -> float:
+        return round(100.0 * (best(view, key) - best(False, key)) / best(False, key), 2)
+
+    n = int(runs[True][0]["entries"])
+    figures["view_overhead_pct"] = pct(lambda r: r["wall"])
     # what the same run without the view differs by from itself: the best of every other run
-    plain = runs[False]
+    plain = [r["wall"] for r in runs[False]]
     a, b = min(plain[0::2]), min(plain[1::2])
     figures["view_noise_pct"] = round(100.0 * abs(a - b) / min(a, b), 2)
+    figures["view_cpu_overhead_pct"] = pct(lambda r: r["cpu"])
+    figures["view_overhead_excl_sync_pct"] = pct(lambda r: r["wall"] - r["sync"])
+    figures["sync_wait_s"] = round(best(False, lambda r: r["sync"]), 3)
+    figures["sync_wait_view_s"] = round(best(True, lambda r: r["sync"]), 3)
+    figures["view_processes_cpu_s"] = round(best(True, lambda r: r["view_cpu"]), 3)
+    figures["peer_load_duty"] = round(float(duty), 3)
+    figures["peer_overhead_pct"] = pct(lambda r: r["wall"], "peer")
+    figures["view_to_peer_time_ratio"] = round(
+        best(True, lambda r: r["wall"]) / best("peer", lambda r: r["wall"]), 4
+    )
     print(
         f"session with and without the view ({len(vevs)} events, {n} entries, one page), "
-        f"best of {args.view_rounds}: {best[True]:.2f} s vs {best[False]:.2f} s: "
-        f"{figures['view_overhead_pct']:+.2f} % (runs without the view differ by "
-        f"{figures['view_noise_pct']:.2f} % among themselves)"
+        f"best of {args.view_rounds}: {best(True, lambda r: r['wall']):.3f} s vs "
+        f"{best(False, lambda r: r['wall']):.3f} s: {figures['view_overhead_pct']:+.2f} % "
+        f"(runs without the view differ by {figures['view_noise_pct']:.2f} % among themselves)"
+    )
+    print(
+        f"  the session's CPU time {figures['view_cpu_overhead_pct']:+.2f} %; its time outside "
+        f"the journal's fsyncs {figures['view_overhead_excl_sync_pct']:+.2f} %; waiting for the "
+        f"fsyncs {figures['sync_wait_view_s']:.3f} s vs {figures['sync_wait_s']:.3f} s; the "
+        f"view's and the page's processes {figures['view_processes_cpu_s']:.2f} s of CPU"
+    )
+    print(
+        f"  the peer (a process busy {duty:.0%} of the time in 4 ms ticks, as the view's and "
+        f"the page's are, and no view): {figures['peer_overhead_pct']:+.2f} %; the view's time "
+        f"/ the peer's {figures['view_to_peer_time_ratio']:.3f}"
     )
     plain_motor, _ = paced_run(sample, geometry, args.view_entries, False)
     view_motor, lat = paced_run(sample, geometry, args.view_entries, True)

@@ -22,9 +22,9 @@ Messages to a page (JSON text, each with ``t`` its type):
     The status line and the floating mark, the latest only (a page is sent
     no more than it can draw).
 
-Changes reach the hub at most every :data:`DELIVERY_INTERVAL_S` (all that
-came meanwhile, in order), so that a busy session wakes the server's thread
-a bounded number of times a second.
+A session's changes reach the hub at once after a pause, then at most every
+:data:`DELIVERY_INTERVAL_S` (all that came meanwhile, in order, as one
+delta), so that a busy session makes a bounded number of deltas a second.
 
 Every page has a bounded queue (:attr:`Viewer.limit` messages). When a page
 does not keep up (a slow network, a page in a background tab, a closed lid)
@@ -50,15 +50,10 @@ log = logging.getLogger(__name__)
 
 #: Messages a page may have waiting before it is resynchronised with the whole state.
 DEFAULT_QUEUE_LIMIT = 256
-#: Changes and the status line are delivered to the hub at most this often, seconds (the
-#: first after a pause at once). Each delivery takes the interpreter from the session's
-#: thread for a moment: 40 a second are as smooth as a screen shows and cost the session
-#: little (``bench_session.py``'s ``view_overhead_pct``), and keep an entry's way to the
-#: page well under 50 ms.
+#: A session's changes, and its status line and mark, are delivered at most this often,
+#: seconds (changes after a pause at once): 40 a second are as smooth as a screen shows
+#: and keep an entry's way to the page well under 50 ms.
 DELIVERY_INTERVAL_S = 0.025
-#: The status line and the floating mark are delivered at most this often, seconds (30 a
-#: second: as smooth as a screen needs).
-STATUS_INTERVAL_S = 1.0 / 30.0
 #: Monitor messages kept for a page that opens later.
 MESSAGES_KEPT = 200
 #: AREA and DHI results kept as overlays.
