@@ -88,11 +88,32 @@ __all__ = [
     "margin_map",
     "run_live",
     "run_tablet_stream",
+    "session_engine",
 ]
 
 log = logging.getLogger(__name__)
 
 _BUTTON_NAMES = frozenset(BUTTONS.values())
+
+
+def session_engine(map_, layer: str, geometry, library, settings: dict) -> Engine:
+    """The engine of a session: over ``map_``, compiling into ``layer``, with its settings.
+
+    A session, its recovery and the view's replay of its journal
+    (:class:`apygis.view.feed.SessionReplica`) all build it here, so that
+    the same journal gives the same engine.
+    """
+    s = settings
+    return Engine(
+        map_,
+        layer,
+        geometry,
+        library=library,
+        snap_mm=s.get("snap_mm", 1.0),
+        sample_tolerance_mm=s.get("sample_tolerance_mm", 0.2),
+        autosave_every=s.get("autosave_every", 50),
+        start_z_m=s.get("start_z_m", 0.0),
+    )
 
 
 @dataclass
@@ -260,17 +281,7 @@ class Session:
             self.finish()
 
     def _engine(self, layer: str) -> Engine:
-        s = self.settings
-        return Engine(
-            self.map,
-            layer,
-            self.geometry,
-            library=self.library,
-            snap_mm=s.get("snap_mm", 1.0),
-            sample_tolerance_mm=s.get("sample_tolerance_mm", 0.2),
-            autosave_every=s.get("autosave_every", 50),
-            start_z_m=s.get("start_z_m", 0.0),
-        )
+        return session_engine(self.map, layer, self.geometry, self.library, self.settings)
 
     # ------------------------------------------------------------------ observers
 

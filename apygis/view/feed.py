@@ -255,23 +255,14 @@ class SessionReplica:
     """
 
     def __init__(self, fh, spec: dict):
-        from apygis.compile.engine import Engine
         from apygis.session.journal import JournalTail
-        from apygis.session.runner import DisplayState
+        from apygis.session.runner import DisplayState, session_engine
 
         self.tail = JournalTail(fh, spec["path"])
         self.map = self.tail.map
         self.geometry = spec["geometry"]
-        s = self.tail.settings
-        self.engine = Engine(
-            self.map,
-            self.tail.layer,
-            self.geometry,
-            library=spec["library"],
-            snap_mm=s.get("snap_mm", 1.0),
-            sample_tolerance_mm=s.get("sample_tolerance_mm", 0.2),
-            autosave_every=s.get("autosave_every", 50),
-            start_z_m=s.get("start_z_m", 0.0),
+        self.engine = session_engine(
+            self.map, self.tail.layer, self.geometry, spec["library"], self.tail.settings
         )
         self.display = DisplayState(**spec["display"])
         self.entries = 0
