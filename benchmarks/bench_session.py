@@ -33,7 +33,7 @@ photos with plate motors), a CalComp tablet at 40 counts/mm.
   CPU the view's and the page's processes used meanwhile.
 * The peer: the same run without the view, beside a process that keeps a
   core busy the same share of the time as the view's and the page's
-  processes did, in 4 ms ticks (``peer_load_duty``): ``peer_overhead_pct``,
+  processes did, waking every 4 ms (``peer_load_duty``): ``peer_overhead_pct``,
   and ``view_to_peer_time_ratio`` the view's best time over the peer's (on
   a two-core virtual machine another busy process lengthens the fsyncs,
   whatever it does).
@@ -210,7 +210,7 @@ while True:
 
 
 class Load:
-    """A process that keeps a core busy ``duty`` of the time, in 4 ms ticks (as the view's does)."""
+    """A process that keeps a core busy ``duty`` of the time, waking every 4 ms."""
 
     def __init__(self, duty: float):
         import subprocess
@@ -233,7 +233,7 @@ def session_run(
     """``evs`` through a Session (journal, motors), with or without the view.
 
     With ``load`` (and no view), a :class:`Load` of that duty runs meanwhile
-    (the peer: what another process using the CPU as the view's does costs).
+    (the peer: what another process using as much CPU as the view's costs).
 
     Returns seconds: ``wall``, ``cpu`` (this process, every thread), ``sync``
     (waiting for the journal's fsyncs), ``view_cpu`` (the view's process and
@@ -465,7 +465,7 @@ def main() -> None:
         f"view's and the page's processes {figures['view_processes_cpu_s']:.2f} s of CPU"
     )
     print(
-        f"  the peer (a process busy {duty:.0%} of the time in 4 ms ticks, as the view's and "
+        f"  the peer (a process busy {duty:.0%} of the time, as the view's and "
         f"the page's are, and no view): {figures['peer_overhead_pct']:+.2f} %; the view's time "
         f"/ the peer's {figures['view_to_peer_time_ratio']:.3f}"
     )

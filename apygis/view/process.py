@@ -255,12 +255,17 @@ def _sigint_ignored():
 def _child_main(conn, sock: socket.socket, hub: ViewHub, host: str, token: str) -> None:
     """The child: serve ``hub`` on ``sock``; follow a session's journal; apply what comes.
 
-    One loop: the pipe is looked at every :data:`FOLLOW_TICK_S` seconds, and
-    so is the journal (an entry is on disk before the session acknowledges
-    it). Changes replayed from the journal go to the hub at once after a
-    pause, then at most every :data:`~apygis.view.hub.DELIVERY_INTERVAL_S`.
-    Before anything the parent sends is applied, the journal is read to its
-    end: the parent flushed it first, so the two arrive in order.
+    One loop, on the pipe and the journal. While the journal is quiet it is
+    looked at every :data:`FOLLOW_TICK_S` seconds, so that an entry after a
+    pause reaches the pages at once; after a read that found events the next
+    comes :data:`~apygis.view.hub.DELIVERY_INTERVAL_S` later, so that a busy
+    session is followed in a few longer stretches of work, not hundreds of
+    short ones (each wake-up of this process lengthened the session's journal
+    fsyncs on a two-core virtual machine: ``bench_session.py``). The changes
+    of each read go to the hub together. The status line the parent sends is
+    passed on as it comes; before changes the parent sends are applied (the
+    end of the session), the journal is read to its end: the parent flushed
+    it first, so the two arrive in order.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     server = ViewServer(hub, host=host, token=token, sock=sock)
@@ -278,43 +283,44 @@ def _child_main(conn, sock: socket.socket, hub: ViewHub, host: str, token: str) 
             conn.send(("viewer", None))
 
     threading.Thread(target=tell_viewer, name="apygis-view-viewer", daemon=True).start()
-    replica = None
-    pending: list[dict] = []
-    delivered = -1e9
+    replica: SessionReplica | None = None
+    next_read = 0.0
 
-    def catch_up() -> None:
-        nonlocal replica
+    def catch_up() -> list[dict]:
+        """The changes of what the journal gained; the time of the next look at it set."""
+        nonlocal replica, next_read
         if replica is None:
-            return
+            return []
+        start = replica.tail.position
         try:
-            pending.extend(replica.catch_up())
+            changes = replica.catch_up()
         except Exception as exc:  # a journal the replica cannot follow: the end corrects the page
             log.error("view: stopped following the session's journal: %s", exc)
             replica = None
+            return []
+        busy = replica.tail.position != start
+        next_read = time.monotonic() + (DELIVERY_INTERVAL_S if busy else FOLLOW_TICK_S)
+        return changes
 
     try:
         while True:
+            wait = max(0.0, next_read - time.monotonic()) if replica is not None else None
             try:
-                msg = conn.recv() if conn.poll(FOLLOW_TICK_S) else None
+                msg = conn.recv() if conn.poll(wait) else None
             except (EOFError, OSError):
                 break
-            if msg is not None and msg[0] == "follow":
+            if msg is None:
+                changes = catch_up()
+                if changes:
+                    server.send(changes, None, None)
+            elif msg[0] == "follow":
                 try:
                     fd = reduction.recv_handle(conn)
                     replica = SessionReplica(os.fdopen(fd, "rb"), msg[1])
                 except Exception as exc:
                     log.error("view: cannot follow the session's journal: %s", exc)
-                continue
-            catch_up()
-            now = time.monotonic()
-            if msg is not None:  # ("send", changes, status, display)
-                if pending or msg[1]:
-                    delivered = now
-                server.send(pending + msg[1], msg[2], msg[3])
-                pending.clear()
-            elif pending and now - delivered >= DELIVERY_INTERVAL_S:
-                server.send(list(pending), None, None)
-                pending.clear()
-                delivered = now
+            else:  # ("send", changes, status, display)
+                changes = catch_up() + msg[1] if msg[1] else []
+                server.send(changes, msg[2], msg[3])
     finally:
         server.stop()
