@@ -215,6 +215,14 @@ def _session(tmp_path):
     return Session(tmp_path / "ZH1091", geometry, layer="c")
 
 
+def _viewed(tmp_path):
+    """A session, its view's process started, and the feed: ``(session, server, feed)``."""
+    sess = _session(tmp_path)
+    server = ViewProcess(session_hub(sess))
+    server.start()
+    return sess, server, SessionFeed(server, sess)
+
+
 def _replay_events(sess):
     rec = SAMPLES / "session" / "ZH1091-revision.rec"
     meta = check_recording(rec)
@@ -239,10 +247,7 @@ def _want(m) -> dict:
 
 
 def test_pages_opened_before_and_during_a_session_end_equal_to_its_map(tmp_path):
-    sess = _session(tmp_path)
-    server = ViewProcess(session_hub(sess))
-    server.start()
-    feed = SessionFeed(server, sess)
+    sess, server, feed = _viewed(tmp_path)
     events = _replay_events(sess)
     early = WsClient(server.url)
     slow = WsClient(server.url, read=False)  # reads nothing until the end
@@ -292,10 +297,7 @@ def test_pages_opened_before_and_during_a_session_end_equal_to_its_map(tmp_path)
 
 def test_the_session_never_waits_for_the_view(tmp_path):
     """A view's process that is stuck (stopped for 2 s) costs the session nothing."""
-    sess = _session(tmp_path)
-    server = ViewProcess(session_hub(sess))
-    server.start()
-    feed = SessionFeed(server, sess)
+    sess, server, feed = _viewed(tmp_path)
     client = WsClient(server.url)
     try:
         client.wait(lambda m: m.seq == 0)
@@ -327,10 +329,7 @@ def test_the_session_never_waits_for_the_view(tmp_path):
 
 
 def test_a_closed_page_and_a_failing_observer_do_not_stop_the_session(tmp_path):
-    sess = _session(tmp_path)
-    server = ViewProcess(session_hub(sess))
-    server.start()
-    feed = SessionFeed(server, sess)
+    sess, server, feed = _viewed(tmp_path)
     calls = []
 
     def broken(session, event, effects):
@@ -360,10 +359,7 @@ def test_a_closed_page_and_a_failing_observer_do_not_stop_the_session(tmp_path):
 
 
 def test_a_killed_view_process_does_not_stop_the_session(tmp_path):
-    sess = _session(tmp_path)
-    server = ViewProcess(session_hub(sess))
-    server.start()
-    feed = SessionFeed(server, sess)
+    sess, server, feed = _viewed(tmp_path)
     try:
         for b in ("DESCR", "1", "ENTER", "0", "6", "ENTER"):
             sess.handle(Press(b))
