@@ -232,3 +232,33 @@ def test_the_tail_reads_what_the_journal_reader_reads(tmp_path_factory, events, 
             got.extend(tail.read())
             pos, k = pos + step, k + 1
     assert got == want
+
+
+def test_a_recovered_session_is_followed_from_where_it_stands(tmp_path, opened):
+    """After a crash and a recovery (the journal replayed, a torn line cut), the view follows."""
+    g = _geometry()
+    base = tmp_path / "T"
+    s1 = Session(base, g, layer="r", scale=5000)
+    s1.handle_all(Press(b) for b in ("DESCR", "2", "ENTER", "ENTER", "1", "1", "ENTER"))
+    for k in range(3):
+        s1.handle(Mark(*g.tablet(2684000.0 + 10 * k, 1247800.0)))
+        s1.handle(Press("ENTER"))
+    s1.journal._fh.flush()
+    with open(s1.journal_path, "ab") as fh:
+        fh.write(b'{"press": "EN')  # the crash tore the last line
+    s1.lock.release()
+    s2 = Session(base, g, layer="c")
+    assert s2.recovered == 13
+    hub = map_hub(s2.map, kind="session")
+    replica = SessionReplica(opened(s2.journal_path), _spec(s2, s2.journal.flush(), s2.entries))
+    assert replica.engine.mode == s2.engine.mode == "line"
+    for k in range(3, 6):
+        s2.handle(Mark(*g.tablet(2684000.0 + 10 * k, 1247800.0)))
+        s2.handle(Press("ENTER"))
+    s2.journal.flush()
+    changes = replica.catch_up()
+    deliver(hub, changes, None, None)
+    assert [e[0] for c in changes for e in c.get("entries", [])] == [4, 5, 6]
+    assert _hub_rows(hub) == _rows(s2.map)
+    assert replica.map.layers["r"].closure(1).points == (1, 2, 3, 4, 5, 6)
+    s2.close()
