@@ -258,6 +258,30 @@ def _event(obj, buttons: frozenset[str]):
     raise ValueError(f"unknown journal record {key!r:.40}")
 
 
+_NUMBER = rb"(-?(?:0|[1-9][0-9]*)(?:\.[0-9]+)?(?:[eE][-+]?[0-9]+)?)"
+#: A mark line as :class:`Journal` writes it (JSON numbers only; anything else, such as
+#: NaN, takes the general parser and its checks).
+_MARK_LINE = re.compile(rb'\{"mark": \[' + _NUMBER + rb", " + _NUMBER + rb"\]\}")
+
+
+def _line_event(raw: bytes, buttons: frozenset[str], path, k: int):
+    """The event of journal line ``k`` (or ``("files", states)``); FormatError naming it.
+
+    Most lines are marks, written by :class:`Journal` in one form: those are
+    read without the general parser (the same values; anything else, such as
+    a mark out of range, takes the general parser and its message).
+    """
+    got = _MARK_LINE.fullmatch(raw)
+    if got is not None:
+        x, y = float(got[1]), float(got[2])
+        if -MAX_MARK_MM <= x <= MAX_MARK_MM and -MAX_MARK_MM <= y <= MAX_MARK_MM:
+            return Mark(x, y)
+    try:
+        return _event(_loads(raw), buttons)
+    except ValueError as exc:
+        raise FormatError(f"bad journal event: {exc}", path=path, record=f"line {k}") from None
+
+
 def _head(raw: bytes, path) -> tuple:
     """The head line: ``(map, layer, settings, version, [file states])``; FormatError if bad."""
     from apygis.formats import ascii as apa
@@ -317,10 +341,7 @@ def read_journal(path) -> JournalContents:
     buttons = _button_names()
     events = []
     for k, raw in enumerate(lines[1:], start=2):
-        try:
-            ev = _event(_loads(raw), buttons)
-        except ValueError as exc:
-            raise FormatError(f"bad journal event: {exc}", path=path, record=f"line {k}") from None
+        ev = _line_event(raw, buttons, path, k)
         if isinstance(ev, tuple):
             if version < 2:
                 raise FormatError(
@@ -343,12 +364,6 @@ def read_journal(path) -> JournalContents:
     )
 
 
-_NUMBER = rb"(-?(?:0|[1-9][0-9]*)(?:\.[0-9]+)?(?:[eE][-+]?[0-9]+)?)"
-#: A mark line as :class:`Journal` writes it (JSON numbers only; anything else, such as
-#: NaN, takes the general parser and its checks).
-_MARK_LINE = re.compile(rb'\{"mark": \[' + _NUMBER + rb", " + _NUMBER + rb"\]\}")
-
-
 class JournalTail:
     """A journal read while its session writes it: the head, then the events as they come.
 
@@ -365,17 +380,15 @@ class JournalTail:
         self.path = Path(path)
         self._fh = fh
         self._rest = b""
-        self.line = 0
-        self.position = 0  # bytes consumed (up to the end of the last complete line)
         raw = b""
         while not raw.endswith(b"\n"):  # the head is written whole, at once
             more = fh.readline()
             if not more:
                 raise FormatError("the journal has no head line", path=self.path, record="line 1")
             raw += more
-        self.position = len(raw)
+        self.position = len(raw)  # bytes consumed (to the end of the last complete line)
         self.line = 1
-        self.map, layer, self.settings, self.version, _ = _head(raw[:-1], self.path)
+        self.map, layer, self.settings, _, _ = _head(raw[:-1], self.path)
         self.layer = layer.lower()
         self._buttons = _button_names()
 
@@ -388,22 +401,10 @@ class JournalTail:
         lines = (self._rest + data).split(b"\n")
         self._rest = lines.pop()
         out = []
-        fast = _MARK_LINE.fullmatch
         for raw in lines:
             self.line += 1
             self.position += len(raw) + 1
-            got = fast(raw)  # most lines are marks: read without the general parser
-            if got is not None:
-                x, y = float(got[1]), float(got[2])
-                if -MAX_MARK_MM <= x <= MAX_MARK_MM and -MAX_MARK_MM <= y <= MAX_MARK_MM:
-                    out.append(Mark(x, y))
-                    continue
-            try:
-                ev = _event(_loads(raw), self._buttons)
-            except ValueError as exc:
-                raise FormatError(
-                    f"bad journal event: {exc}", path=self.path, record=f"line {self.line}"
-                ) from None
+            ev = _line_event(raw, self._buttons, self.path, self.line)
             if not isinstance(ev, tuple):
                 out.append(ev)
         return out

@@ -85,6 +85,7 @@ __all__ = [
     "DisplayState",
     "SaveError",
     "Session",
+    "keep_effect",
     "margin_map",
     "run_live",
     "run_tablet_stream",
@@ -94,6 +95,22 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _BUTTON_NAMES = frozenset(BUTTONS.values())
+
+
+def keep_effect(e, display: DisplayState) -> int:
+    """What a session keeps of effect ``e``, also while it replays a journal.
+
+    The PROCEED menu's display settings go into ``display``; returns 1 for an
+    entry (a record effect), else 0. A session and the view's replay of its
+    journal (:class:`apygis.view.feed.SessionReplica`) both keep them here.
+    """
+    if isinstance(e, RECORD_EFFECTS):
+        return 1
+    if isinstance(e, DisplayScale):
+        display.scale = e.factor
+    elif isinstance(e, CrosshairScale):
+        display.crosshair = e.factor
+    return 0
 
 
 def session_engine(map_, layer: str, geometry, library, settings: dict) -> Engine:
@@ -370,12 +387,7 @@ class Session:
         return effects
 
     def _effect(self, e) -> None:
-        if isinstance(e, RECORD_EFFECTS):
-            self.entries += 1
-        elif isinstance(e, DisplayScale):  # state, kept through a replay too
-            self.display.scale = e.factor
-        elif isinstance(e, CrosshairScale):
-            self.display.crosshair = e.factor
+        self.entries += keep_effect(e, self.display)  # state, kept through a replay too
         if self._replaying or self.finished:  # recovery, or after the end: act on nothing
             return
         if isinstance(e, Plates):

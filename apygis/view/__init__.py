@@ -12,18 +12,20 @@ machine's browser:
   nobody waits);
 * :mod:`~apygis.view.server` -- the web server (aiohttp on a thread of its
   own; every address under a secret token; view only);
-* :mod:`~apygis.view.feed` -- a map's hub, the session observer, and an
-  orientation's control points as overlays;
+* :mod:`~apygis.view.feed` -- a map's hub; a session's replica (its journal
+  replayed) and the changes it makes; the session's mark and status line;
+  an orientation's control points as overlays;
 * :mod:`~apygis.view.process` -- a session's server in a process of its own,
-  fed through a pipe (serving pages takes nothing from the compilation);
+  which follows the session's journal (serving pages takes nothing from the
+  compilation);
 * ``static/`` -- the page: plain JavaScript drawing on a canvas, nothing
   loaded from elsewhere.
 
 Layering: this package imports :mod:`apygis.model`, :mod:`apygis.compile`
-(the effects it shows), the pens of :mod:`apygis.plot.plotdef` and the
-floor; the session does not import it (the view subscribes to a session
-through :meth:`apygis.session.Session.subscribe`), the command line wires
-the two.
+(the effects it shows), the pens of :mod:`apygis.plot.plotdef`, the
+session's journal and engine set-up (:mod:`apygis.session`, to replay a
+session) and the floor; the session does not import it, the command line
+wires the two.
 """
 
 from apygis.view.feed import (

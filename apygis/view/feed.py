@@ -27,7 +27,6 @@ from typing import Any
 import numpy as np
 
 from apygis.compile.events import (
-    RECORD_EFFECTS,
     Added,
     AreaShown,
     CrosshairScale,
@@ -148,11 +147,9 @@ class SessionFeed:
         self.map_id = session.map.id
         self._session = session
         self._geometry = session.geometry
-        lay = session.map.layers.get(session.engine.layer_ext)
-        self._counts = {t: len(lay.table(t)) for t in TABLE_NAMES} if lay is not None else {}
+        self._counts: dict[str, int] = {}  # of the layer compiled into (the last known)
         self._sent_key: tuple | None = None
         self._stop = threading.Event()
-        self.deliveries = 0
         offset = session.journal.flush()  # every event so far where the view's process reads it
         fd = os.open(session.journal_path, os.O_RDONLY)
         try:
@@ -203,7 +200,6 @@ class SessionFeed:
             try:
                 status, display = self._status(changed_only=True)
                 if status is not None:
-                    self.deliveries += 1
                     if not self.server.send([], status, display):
                         return
                 elif self.server.closed:
@@ -256,8 +252,9 @@ class SessionReplica:
 
     def __init__(self, fh, spec: dict):
         from apygis.session.journal import JournalTail
-        from apygis.session.runner import DisplayState, session_engine
+        from apygis.session.runner import DisplayState, keep_effect, session_engine
 
+        self._keep = keep_effect
         self.tail = JournalTail(fh, spec["path"])
         self.map = self.tail.map
         self.geometry = spec["geometry"]
@@ -274,14 +271,9 @@ class SessionReplica:
 
     def _handle(self, ev) -> list:
         effects = self.engine.handle(ev)
-        for e in effects:  # what the session keeps of them (Session._effect)
-            if isinstance(e, RECORD_EFFECTS):
-                self.entries += 1
-            elif isinstance(e, DisplayScale):
-                self.display.scale = e.factor
-            elif isinstance(e, CrosshairScale):
-                self.display.crosshair = e.factor
-            elif isinstance(e, Terminate):
+        for e in effects:  # what the session keeps of them
+            self.entries += self._keep(e, self.display)
+            if isinstance(e, Terminate):
                 self.finished = True
         return effects
 

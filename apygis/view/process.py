@@ -195,16 +195,7 @@ class ViewProcess:
         view is stopped or the child has gone (said once in the log: the
         session goes on without it).
         """
-        with self._lock:
-            if self.closed or self._conn is None:
-                return False
-            try:
-                self._conn.send(("send", changes, status, display))
-            except (OSError, ValueError, EOFError) as exc:
-                self._gone = True
-                log.warning("view: the page's server has gone (%s); the session goes on", exc)
-                return False
-        return True
+        return self._write(lambda conn: conn.send(("send", changes, status, display)))
 
     def follow(self, spec: dict, fd: int) -> None:
         """Have the child follow a session's journal (:class:`~apygis.view.feed.SessionReplica`).
@@ -212,15 +203,25 @@ class ViewProcess:
         ``fd``: the journal open for reading, handed over (duplicated) with
         ``spec``; the caller closes its own.
         """
+
+        def write(conn) -> None:
+            conn.send(("follow", spec))
+            reduction.send_handle(conn, fd, self._proc.pid)
+
+        self._write(write)
+
+    def _write(self, write) -> bool:
+        """``write(conn)`` under the lock; False (the child gone, said once) if it cannot be."""
         with self._lock:
             if self.closed or self._conn is None:
-                return
+                return False
             try:
-                self._conn.send(("follow", spec))
-                reduction.send_handle(self._conn, fd, self._proc.pid)
-            except (OSError, ValueError) as exc:
+                write(self._conn)
+            except (OSError, ValueError, EOFError) as exc:
                 self._gone = True
                 log.warning("view: the page's server has gone (%s); the session goes on", exc)
+                return False
+        return True
 
     def wait_for_viewer(self, timeout: float) -> bool:
         """Wait until a page has connected (True), or ``timeout`` seconds (False)."""
