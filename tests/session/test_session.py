@@ -195,8 +195,11 @@ def test_noisy_serial_line_compiles_the_same_map(tmp_path, geometry):
     assert apygis.read(tmp_path / "ZH1091") == apygis.read(SESSION / "ZH1091-revision.expected.apa")
 
 
-def test_recovery_restores_records_and_the_line_in_progress(tmp_path, geometry):
-    base = tmp_path / "T2"
+def crash_with_a_line_in_progress(base, geometry) -> None:
+    """A session at ``base`` that entered 3 points of a line (layer r), then crashed.
+
+    Its journal holds 13 events and a torn last line; its lock is gone.
+    """
     s1 = Session(base, geometry, layer="r", scale=5000)
     s1.handle_all(Press(b) for b in ("DESCR", "2", "ENTER", "ENTER", "1", "1", "ENTER"))
     for k in range(3):
@@ -206,6 +209,11 @@ def test_recovery_restores_records_and_the_line_in_progress(tmp_path, geometry):
     with open(s1.journal_path, "ab") as fh:
         fh.write(b'{"press": "EN')  # a torn last line
     s1.lock.release()  # the crash: the kernel drops the dead process's lock
+
+
+def test_recovery_restores_records_and_the_line_in_progress(tmp_path, geometry):
+    base = tmp_path / "T2"
+    crash_with_a_line_in_progress(base, geometry)
     lines = []
     s2 = Session(base, geometry, layer="c", monitor=lines.append)
     assert s2.recovered == 3 + 7 + 3

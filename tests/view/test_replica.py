@@ -27,6 +27,7 @@ from apygis.session.journal import JournalTail
 from apygis.view import SessionReplica, deliver, map_hub
 from apygis.view.scene import layer_rows
 from tests.conftest import SAMPLES
+from tests.session.test_session import crash_with_a_line_in_progress
 from tests.view.test_server import _replay_events
 
 
@@ -204,17 +205,19 @@ _EVENTS = st.lists(
 )
 @given(events=_EVENTS, cuts=st.lists(st.integers(1, 200), min_size=1, max_size=20))
 def test_the_tail_reads_what_the_journal_reader_reads(tmp_path_factory, events, cuts):
-    """Written in pieces of any size, the tail gives the events read_journal gives."""
+    """Written in pieces of any size, the tail gives the events written, as read_journal does."""
     from apygis.model.map import MapFile
     from apygis.session.journal import Journal, read_journal
 
     d = tmp_path_factory.mktemp("j")
     j = Journal.create(d / "m.journal", MapFile("M"), "c", {}, {})
+    written = []
     for ev in events:
         try:
             j.append(ev, sync=False)
         except Exception:  # text the journal cannot hold (surrogates) is refused there
             continue
+        written.append(ev)
     j.close()
     data = (d / "m.journal").read_bytes()
     want = read_journal(d / "m.journal").events
@@ -232,21 +235,14 @@ def test_the_tail_reads_what_the_journal_reader_reads(tmp_path_factory, events, 
             got.extend(tail.read())
             pos, k = pos + step, k + 1
     assert got == want
+    assert got == written
 
 
 def test_a_recovered_session_is_followed_from_where_it_stands(tmp_path, opened):
     """After a crash and a recovery (the journal replayed, a torn line cut), the view follows."""
     g = _geometry()
     base = tmp_path / "T"
-    s1 = Session(base, g, layer="r", scale=5000)
-    s1.handle_all(Press(b) for b in ("DESCR", "2", "ENTER", "ENTER", "1", "1", "ENTER"))
-    for k in range(3):
-        s1.handle(Mark(*g.tablet(2684000.0 + 10 * k, 1247800.0)))
-        s1.handle(Press("ENTER"))
-    s1.journal._fh.flush()
-    with open(s1.journal_path, "ab") as fh:
-        fh.write(b'{"press": "EN')  # the crash tore the last line
-    s1.lock.release()
+    crash_with_a_line_in_progress(base, g)
     s2 = Session(base, g, layer="c")
     assert s2.recovered == 13
     hub = map_hub(s2.map, kind="session")
